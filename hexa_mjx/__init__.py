@@ -1,0 +1,1 @@
+"""hexa_mjx: a JAX-native, massively parallel hexapod trainer on MuJoCo MJX."""
