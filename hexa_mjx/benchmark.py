@@ -1,0 +1,97 @@
+"""Environment speed: MJX batched env/physics steps per second beside MuJoCo C.
+
+    python -m hexa_mjx.benchmark [--batches 64 256 1024] [--steps 100] [--repeats 3]
+
+Prints compile time, then for each batch size the median over repeats of env
+steps/s and physics steps/s (env steps x substeps) under random actions, then
+MuJoCo C's single-thread physics steps/s on the same model (mujoco.rollout) and
+the MJX/C ratio. Everything is measured in one run, side by side.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+import jax
+import jax.numpy as jp
+import mujoco
+import numpy as np
+from mujoco import rollout
+
+import hexa_mjx
+
+
+def _rollout_fn(env, steps):
+    """A jitted batched rollout of `steps` control steps under uniform random actions."""
+    def run(state, rng):
+        def body(carry, _):
+            state, rng = carry
+            rng, key = jax.random.split(rng)
+            action = jax.random.uniform(key, (state.obs.shape[0], env.action_size), minval=-1, maxval=1)
+            return (jax.vmap(env.step)(state, action), rng), None
+        (state, _), _ = jax.lax.scan(body, (state, rng), None, length=steps)
+        return state
+    return jax.jit(run)
+
+
+def mjx_speed(env, batch: int, steps: int, repeats: int) -> dict:
+    """Compile time and median env steps/s for one batch size."""
+    reset = jax.jit(jax.vmap(env.reset))
+    run = _rollout_fn(env, steps)
+    state = reset(jax.random.split(jax.random.PRNGKey(0), batch))
+    t0 = time.perf_counter()
+    state = jax.block_until_ready(run(state, jax.random.PRNGKey(1)))
+    compile_s = time.perf_counter() - t0
+    rates = []
+    for r in range(repeats):
+        t0 = time.perf_counter()
+        state = jax.block_until_ready(run(state, jax.random.PRNGKey(2 + r)))
+        rates.append(batch * steps / (time.perf_counter() - t0))
+    env_rate = statistics.median(rates)
+    return {"batch": batch, "compile_s": compile_s, "env_steps_per_s": env_rate,
+            "physics_steps_per_s": env_rate * env.n_substeps}
+
+
+def mujoco_c_speed(model: mujoco.MjModel, steps: int, repeats: int, seed: int = 0) -> float:
+    """Median single-thread physics steps/s of MuJoCo C (mujoco.rollout) under random targets."""
+    data = mujoco.MjData(model)
+    mujoco.mj_resetDataKeyframe(model, data, model.key("home").id)
+    state = np.zeros(mujoco.mj_stateSize(model, mujoco.mjtState.mjSTATE_FULLPHYSICS))
+    mujoco.mj_getState(model, data, state, mujoco.mjtState.mjSTATE_FULLPHYSICS)
+    lo, hi = model.actuator_ctrlrange.T
+    rng = np.random.default_rng(seed)
+    control = lo + (hi - lo) * rng.uniform(size=(1, steps, model.nu))
+    rates = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        rollout.rollout(model, data, state[None], control)
+        rates.append(steps / (time.perf_counter() - t0))
+    return statistics.median(rates)
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(prog="python -m hexa_mjx.benchmark", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--batches", type=int, nargs="+", default=[64, 256, 1024], help="numbers of environments")
+    parser.add_argument("--steps", type=int, default=100, help="control steps per timed rollout")
+    parser.add_argument("--repeats", type=int, default=3, help="timed rollouts per batch size (median reported)")
+    parser.add_argument("--ctrl_hz", type=float, default=60.0, help="control rate, Hz")
+    args = parser.parse_args(argv)
+
+    env = hexa_mjx.make_env(ctrl_hz=args.ctrl_hz)
+    m = env.mj_model
+    print(f"model: {env.config.model_path}  nv={m.nv} nu={m.nu} ngeom={m.ngeom} "
+          f"solver iterations={m.opt.iterations} ls_iterations={m.opt.ls_iterations} "
+          f"substeps/env step={env.n_substeps}  jax {jax.__version__} on {jax.devices()[0].platform}")
+    c_rate = mujoco_c_speed(m, steps=4000, repeats=args.repeats)
+    print(f"{'envs':>6} {'compile s':>10} {'env steps/s':>12} {'physics steps/s':>16} {'vs MuJoCo C 1-thread':>21}")
+    for batch in args.batches:
+        r = mjx_speed(env, batch, args.steps, args.repeats)
+        print(f"{batch:>6} {r['compile_s']:>10.1f} {r['env_steps_per_s']:>12.0f} {r['physics_steps_per_s']:>16.0f} "
+              f"{r['physics_steps_per_s'] / c_rate:>20.0%}")
+    print(f"MuJoCo C single-thread (mujoco.rollout): {c_rate:.0f} physics steps/s")
+
+
+if __name__ == "__main__":
+    main()

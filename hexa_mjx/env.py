@@ -1,0 +1,247 @@
+"""The hexapod goal-reaching environment: pure JAX, jit- and vmap-able, brax `Env` interface.
+
+    env = make_env("goal_directed", ctrl_hz=60)
+    state = jax.jit(env.reset)(jax.random.PRNGKey(0))
+    state = jax.jit(env.step)(state, jp.zeros(env.action_size))
+
+Episode bookkeeping that must not leak across an automatic reset lives in
+`state.info` and is reset by `step` itself on the last step of an episode (brax's
+AutoResetWrapper restores only `pipeline_state` and `obs`); the previous distance
+to the goal is derived from the previous physics state rather than stored.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import jax
+import jax.numpy as jp
+import mujoco
+import numpy as np
+from brax.envs.base import Env, State
+
+from mujoco import mjx
+
+from hexa_mjx import rewards, robot
+
+
+@dataclasses.dataclass(frozen=True)
+class EnvConfig:
+    """Environment settings; `make_env(**overrides)` sets any of them by name."""
+
+    reward: str = "goal_directed"  # a key of rewards.VARIANTS
+    ablate: tuple[str, ...] = ()  # keys of rewards.ABLATIONS whose terms are zeroed
+    reward_scales: dict = dataclasses.field(default_factory=dict)  # per-term scale overrides
+    model_path: str = str(robot.MODEL_XML)
+    ctrl_hz: float = 60.0  # Hz, policy rate; 240 Hz physics / ctrl_hz must be whole
+    episode_length: int = 1000  # control steps
+    goal_distance: float = 1.5  # m, goal placed this far ahead (+x) of the start
+    success_radius: float = 0.5  # m
+    target_height: float = 0.12  # m, torso-origin height the height term aims for
+    lift_clearance: float = 0.02  # m, foot height above which a leg's floor contact is "bad"
+    settle_steps: int = 100  # physics steps the start pose settles before the first observation
+    solver_iterations: int | None = None  # None: the model's own setting
+    ls_iterations: int | None = None
+
+
+def floor_contacts(data: mjx.Data):
+    """(geom1, geom2, dist) of MJX's contact arrays (JAX implementation only)."""
+    contact = data._impl.contact
+    return contact.geom1, contact.geom2, contact.dist
+
+
+def roll_pitch(quat):
+    """Roll and pitch (ZYX Euler angles, rad) of a (w, x, y, z) quaternion."""
+    w, x, y, z = quat
+    roll = jp.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = jp.arcsin(jp.clip(2 * (w * y - z * x), -1.0, 1.0))
+    return roll, pitch
+
+
+def _rotate(vec, quat):
+    """Rotate `vec` by the (w, x, y, z) quaternion `quat`."""
+    w, u = quat[0], quat[1:]
+    return vec + 2 * jp.cross(u, jp.cross(u, vec) + w * vec)
+
+
+class HexapodEnv(Env):
+    """Walk to a goal `goal_distance` ahead; see the README for observation, action and reward."""
+
+    def __init__(self, config: EnvConfig = EnvConfig()):
+        self.config = config
+        self.scales = rewards.make_scales(config.reward, config.ablate, config.reward_scales)
+        path = Path(config.model_path)
+        if not path.is_file():
+            raise FileNotFoundError(f"model {path} not found; run `python -m hexa_mjx.convert URDF -o {path}`")
+        model = mujoco.MjModel.from_xml_path(str(path))
+        if config.solver_iterations is not None:
+            model.opt.iterations = config.solver_iterations
+        if config.ls_iterations is not None:
+            model.opt.ls_iterations = config.ls_iterations
+        self.mj_model = model
+
+        substeps = 1.0 / (config.ctrl_hz * model.opt.timestep)
+        if config.ctrl_hz <= 0 or abs(substeps - round(substeps)) > 1e-3 or round(substeps) < 1:
+            rate = round(1.0 / model.opt.timestep, 3)  # the MJCF stores the timestep to 6 digits
+            choices = [round(rate / n, 3) for n in range(1, 13) if abs(rate / n - round(rate / n)) < 1e-3]
+            raise ValueError(f"ctrl_hz={config.ctrl_hz} is not the {rate:g} Hz physics rate divided by a whole "
+                             f"number; choose e.g. one of {choices}")
+        self.n_substeps = int(round(substeps))
+        if config.episode_length < 1:
+            raise ValueError(f"episode_length must be at least 1, got {config.episode_length}")
+
+        self._floor = model.geom(robot.FLOOR_GEOM).id
+        self._torso = model.body(robot.TORSO_BODY).id
+        self._goal_mocap = model.body_mocapid[model.body(robot.GOAL_BODY).id]
+        legs = sorted({model.joint(j).name.split("_")[0] for j in range(model.njnt)
+                       if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE}, key=lambda s: int(s[3:]))
+        self._feet = np.array([model.geom(robot.foot_geom(leg)).id for leg in legs])
+        # Leg index of every geom (-1 for the torso and the world), and whether it is a foot.
+        body_leg = np.full(model.nbody, -1)
+        for i, leg in enumerate(legs):
+            for j in range(model.njnt):
+                if model.joint(j).name.startswith(leg + "_"):
+                    body_leg[model.jnt_bodyid[j]] = i
+        for b in range(1, model.nbody):  # bodies without joints inherit their parent's leg
+            if body_leg[b] < 0 and model.body_parentid[b] > 0:
+                body_leg[b] = body_leg[model.body_parentid[b]]
+        self._geom_leg = jp.asarray(body_leg[model.geom_bodyid])
+        self._geom_is_foot = jp.asarray(np.isin(np.arange(model.ngeom), self._feet))
+        self._ctrl_lo, self._ctrl_hi = (jp.asarray(x, dtype=jp.float32) for x in model.actuator_ctrlrange.T)
+
+        # Settle the start pose once with MuJoCo C; every reset starts from that state.
+        data = mujoco.MjData(model)
+        mujoco.mj_resetDataKeyframe(model, data, model.key("home").id)
+        for _ in range(config.settle_steps):
+            mujoco.mj_step(model, data)
+        self._qpos0, self._qvel0, self._ctrl0 = (jp.asarray(x, dtype=jp.float32) for x in (data.qpos, data.qvel, data.ctrl))
+        self._start_xy = jp.asarray(data.qpos[:2], dtype=jp.float32)
+        self._goal = self._start_xy + jp.array([config.goal_distance, 0.0])
+        self.mjx_model = mjx.put_model(model, impl="jax")
+        self._data0 = mjx.make_data(self.mjx_model, impl="jax")
+
+    # -- brax Env interface -------------------------------------------------
+
+    @property
+    def observation_size(self) -> int:
+        return 13 + 2 * self.mj_model.nu + 3
+
+    @property
+    def action_size(self) -> int:
+        return self.mj_model.nu
+
+    @property
+    def backend(self) -> str:
+        return "mjx"
+
+    @property
+    def dt(self) -> float:
+        """Control period, s."""
+        return self.n_substeps * float(self.mj_model.opt.timestep)
+
+    def reset(self, rng: jax.Array) -> State:
+        """Start an episode from the settled standing pose."""
+        mocap = self._data0.mocap_pos.at[self._goal_mocap, :2].set(self._goal)
+        data = self._data0.replace(qpos=self._qpos0, qvel=self._qvel0, ctrl=self._ctrl0, mocap_pos=mocap)
+        data = mjx.forward(self.mjx_model, data)
+        zero = jp.zeros(())
+        metrics = {f"reward/{name}": zero for name in self._active_terms()}
+        metrics.update(distance=self._distance(data), success=zero, fell=zero, nonfinite=zero)
+        info = {"rng": rng, "t": jp.zeros((), jp.int32), "success": zero}
+        return State(data, self._obs(data), zero, zero, metrics, info)
+
+    def step(self, state: State, action: jax.Array) -> State:
+        """Apply one control step: position targets from `action` in [-1, 1], `n_substeps` physics steps."""
+        if action.shape != (self.action_size,):
+            raise ValueError(f"action must have shape ({self.action_size},) per environment, got {action.shape}; "
+                             "batch environments with jax.vmap")
+        prev = state.pipeline_state
+        target = self._ctrl_lo + (jp.clip(action, -1.0, 1.0) + 1.0) * 0.5 * (self._ctrl_hi - self._ctrl_lo)
+        data = prev.replace(ctrl=target)
+        data, _ = jax.lax.scan(lambda d, _: (mjx.step(self.mjx_model, d), None), data, None, length=self.n_substeps)
+
+        # A diverged physics state never reaches the learner: keep the last finite one and end the episode.
+        finite = jp.isfinite(data.qpos).all() & jp.isfinite(data.qvel).all()
+        data = jax.tree.map(lambda new, old: jp.where(finite, new, old), data, prev)
+        data = data.replace(qpos=jp.where(jp.isfinite(data.qpos), data.qpos, self._qpos0),
+                            qvel=jp.where(jp.isfinite(data.qvel), data.qvel, 0.0))
+
+        roll, pitch = roll_pitch(data.qpos[3:7])
+        fell = (jp.abs(roll) > jp.pi / 2) | (jp.abs(pitch) > jp.pi / 2)
+        done = fell | ~finite
+        terms = self._terms(prev, data, done)
+        scaled = {name: self.scales[name] * value for name, value in terms.items()}
+        reward = sum(scaled.values())
+
+        dist = self._distance(data)
+        success = jp.maximum(state.info["success"], (dist < self.config.success_radius).astype(jp.float32))
+        t = state.info["t"] + 1
+        over = done | (t >= self.config.episode_length)
+        info = {**state.info, "t": jp.where(over, 0, t), "success": jp.where(over, 0.0, success)}
+        metrics = {f"reward/{name}": value for name, value in scaled.items()}
+        metrics.update(distance=dist, success=success, fell=fell.astype(jp.float32),
+                       nonfinite=(~finite).astype(jp.float32))
+        return state.replace(pipeline_state=data, obs=self._obs(data), reward=reward,
+                             done=done.astype(jp.float32), metrics=metrics, info=info)
+
+    # -- internals ------------------------------------------------------------
+
+    def _active_terms(self):
+        return [name for name, scale in self.scales.items() if scale != 0.0]
+
+    def _distance(self, data):
+        return jp.linalg.norm(self._goal - data.qpos[:2])
+
+    def _obs(self, data):
+        goal_vec = self._goal - data.qpos[:2]
+        angvel_world = _rotate(data.qvel[3:6], data.qpos[3:7])  # free-joint angular velocity is body-frame
+        return jp.concatenate([data.qpos[:3], data.qpos[3:7], data.qvel[:3], angvel_world,
+                               data.qpos[7:], data.qvel[6:], goal_vec, jp.linalg.norm(goal_vec)[None]])
+
+    def _contact_counts(self, data):
+        """(bad leg contacts, non-foot contacts) with the floor, from MJX's contact arrays."""
+        geom1, geom2, dist = floor_contacts(data)
+        on_floor = (dist < 0) & ((geom1 == self._floor) | (geom2 == self._floor))
+        other = jp.where(geom1 == self._floor, geom2, geom1)
+        leg = self._geom_leg[other]
+        foot_clearance = data.geom_xpos[self._feet, 2] - self.mj_model.geom_size[self._feet, 0]
+        lifted = foot_clearance[jp.maximum(leg, 0)] > self.config.lift_clearance
+        bad = on_floor & (leg >= 0) & lifted
+        return bad.sum(), (on_floor & ~self._geom_is_foot[other]).sum()
+
+    def _terms(self, prev, data, done):
+        """Unscaled values of the active reward terms for one transition."""
+        xy, prev_xy, vel_xy = data.qpos[:2], prev.qpos[:2], data.qvel[:2]
+        goal_dir = self._goal - xy
+        goal_dir = goal_dir / jp.maximum(jp.linalg.norm(goal_dir), 1e-6)
+        roll, pitch = roll_pitch(data.qpos[3:7])
+        bad, non_foot = self._contact_counts(data)
+        dist_prev, dist = self._distance(prev), self._distance(data)
+        # Inputs of every term; XLA drops whatever the active terms do not use.
+        inputs = {
+            "goal_approach": (dist_prev, dist),
+            "velocity_alignment": (vel_xy, goal_dir),
+            "goal_bonus": (dist, self.config.success_radius),
+            "stability": (roll, pitch),
+            "height": (data.qpos[2], self.config.target_height),
+            "energy": (data.qvel[6:],),
+            "contact_quality": (bad,),
+            "body_contact": (non_foot,),
+            "termination": (done,),
+            "forward_progress": (prev_xy, xy),
+            "forward_velocity": (vel_xy,),
+        }
+        return {name: rewards.TERMS[name](*inputs[name]) for name in self._active_terms()}
+
+
+def make_env(reward: str = "goal_directed", **overrides) -> HexapodEnv:
+    """Build the environment for a reward variant; keyword overrides set `EnvConfig` fields."""
+    fields = {f.name for f in dataclasses.fields(EnvConfig)}
+    unknown = sorted(set(overrides) - fields)
+    if unknown:
+        raise TypeError(f"unknown environment setting(s) {unknown}; valid names are {sorted(fields - {'reward'})}")
+    if "ablate" in overrides:
+        ablate = overrides["ablate"]
+        overrides["ablate"] = (ablate,) if isinstance(ablate, str) else tuple(ablate)
+    return HexapodEnv(EnvConfig(reward=reward, **overrides))

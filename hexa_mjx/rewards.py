@@ -1,0 +1,113 @@
+"""Reward terms (report eq. 1 and section 3.2) and the scale tables that weight them.
+
+Each term is a pure function of explicit arrays returning an unscaled value, so it
+can be tested without MuJoCo. A reward variant is a scales table; an ablation sets
+some scales to zero, and a zero scale drops the term from the computation.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jp
+
+
+def goal_approach(prev_dist, dist):
+    """Metres of distance to the goal closed this step (report: x1000)."""
+    return prev_dist - dist
+
+
+def velocity_alignment(vel_xy, goal_dir_xy):
+    """|v| * (v_hat . g_hat) = planar speed toward the goal, m/s."""
+    return jp.dot(vel_xy, goal_dir_xy)
+
+
+def goal_bonus(dist, success_radius):
+    """1 while the torso is within the success radius of the goal."""
+    return (dist < success_radius).astype(jp.float32)
+
+
+def stability(roll, pitch):
+    """|roll| + |pitch| of the torso, rad."""
+    return jp.abs(roll) + jp.abs(pitch)
+
+
+def height(z, target):
+    """|z - target| of the torso origin, m."""
+    return jp.abs(z - target)
+
+
+def energy(joint_vel):
+    """Sum of squared joint velocities, (rad/s)^2."""
+    return jp.sum(jp.square(joint_vel))
+
+
+def contact_quality(bad_leg_contacts):
+    """Leg contacts with the floor while that leg's foot is lifted (leg-side dragging)."""
+    return bad_leg_contacts.astype(jp.float32)
+
+
+def body_contact(non_foot_contacts):
+    """Floor contacts of any geom that is not a foot."""
+    return non_foot_contacts.astype(jp.float32)
+
+
+def termination(flipped):
+    """1 on the step the episode ends by a fall (or a non-finite physics state)."""
+    return flipped.astype(jp.float32)
+
+
+def forward_progress(prev_xy, xy):
+    """d_moved * cos(theta) toward +x, m: the report's forward-motion baseline."""
+    return xy[0] - prev_xy[0]
+
+
+def forward_velocity(vel_xy):
+    """Speed along +x, m/s: the baseline's velocity term."""
+    return vel_xy[0]
+
+
+TERMS = {
+    f.__name__: f
+    for f in (goal_approach, velocity_alignment, goal_bonus, stability, height, energy, contact_quality,
+              body_contact, termination, forward_progress, forward_velocity)
+}
+
+_SHAPING = {
+    "stability": -0.5,
+    "height": -2.0,
+    "energy": -1e-4,
+    "contact_quality": -0.5,
+    "body_contact": -1.0,
+    "termination": -200.0,  # the report's code: -200 for a flip
+}
+
+VARIANTS: dict[str, dict[str, float]] = {
+    # Report section 3.2: approach the goal.
+    "goal_directed": {"goal_approach": 1000.0, "velocity_alignment": 5.0, "goal_bonus": 100.0,
+                      "forward_progress": 0.0, "forward_velocity": 0.0, **_SHAPING},
+    # Report section 4.2 baseline: move along +x, no goal bonus.
+    "forward_motion": {"goal_approach": 0.0, "velocity_alignment": 0.0, "goal_bonus": 0.0,
+                       "forward_progress": 1000.0, "forward_velocity": 5.0, **_SHAPING},
+}
+
+ABLATIONS: dict[str, tuple[str, ...]] = {
+    "contact": ("contact_quality", "body_contact"),
+    "height": ("height",),
+    "stability": ("stability",),
+    "velocity": ("velocity_alignment", "forward_velocity"),
+}
+
+
+def make_scales(reward: str = "goal_directed", ablate=(), overrides: dict | None = None) -> dict[str, float]:
+    """The scales table for a variant, with ablated terms zeroed and explicit overrides applied."""
+    if reward not in VARIANTS:
+        raise ValueError(f"unknown reward {reward!r}; choose one of {sorted(VARIANTS)}")
+    scales = dict(VARIANTS[reward])
+    for name in ablate:
+        if name not in ABLATIONS:
+            raise ValueError(f"unknown ablation {name!r}; choose from {sorted(ABLATIONS)}")
+        scales.update({term: 0.0 for term in ABLATIONS[name]})
+    for term, value in (overrides or {}).items():
+        if term not in TERMS:
+            raise ValueError(f"unknown reward term {term!r}; terms are {sorted(TERMS)}")
+        scales[term] = float(value)
+    return scales
