@@ -21,6 +21,7 @@ import numpy as np
 from mujoco import rollout
 
 import hexa_mjx
+from hexa_mjx import robot
 
 
 def _rollout_fn(env, steps):
@@ -71,6 +72,39 @@ def mujoco_c_speed(model: mujoco.MjModel, steps: int, repeats: int, seed: int = 
     return statistics.median(rates)
 
 
+def gait_actions(steps: int, dt: float) -> np.ndarray:
+    """A smooth, gait-like action sequence (18 phase-shifted sines) for reproducible rollouts."""
+    t = np.arange(steps)[:, None] * dt
+    actions = 0.5 * np.sin(2 * np.pi * 1.5 * t + 0.7 * np.arange(18)[None])
+    actions[:, 2::3] -= 0.5  # ankles near their zero angle
+    return actions
+
+
+def c_rollout(env, model: mujoco.MjModel, actions: np.ndarray) -> np.ndarray:
+    """qpos after each control step when MuJoCo C runs `actions` from the env's start state."""
+    data = mujoco.MjData(model)
+    data.qpos[:], data.qvel[:] = np.asarray(env._qpos0), np.asarray(env._qvel0)
+    mujoco.mj_forward(model, data)
+    lo, hi = model.actuator_ctrlrange.T
+    out = []
+    for action in actions:
+        data.ctrl[:] = lo + (np.clip(action, -1, 1) + 1) / 2 * (hi - lo)
+        for _ in range(env.n_substeps):
+            mujoco.mj_step(model, data)
+        out.append(data.qpos.copy())
+    return np.array(out)
+
+
+def solver_error(env, steps: int) -> tuple[float, float]:
+    """Max torso-position (m) and joint-angle (rad) gap between the model's solver settings and
+    robot.TIGHT_SOLVER after `steps` control steps of gait_actions, both in MuJoCo C."""
+    actions = gait_actions(steps, env.dt)
+    tight = mujoco.MjModel.from_xml_path(env.config.model_path)
+    tight.opt.iterations, tight.opt.ls_iterations = robot.TIGHT_SOLVER["iterations"], robot.TIGHT_SOLVER["ls_iterations"]
+    fast, ref = c_rollout(env, env.mj_model, actions)[-1], c_rollout(env, tight, actions)[-1]
+    return float(np.abs(fast[:3] - ref[:3]).max()), float(np.abs(fast[7:] - ref[7:]).max())
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(prog="python -m hexa_mjx.benchmark", description=__doc__.split("\n\n")[0])
     parser.add_argument("--batches", type=int, nargs="+", default=[64, 256, 1024], help="numbers of environments")
@@ -91,6 +125,10 @@ def main(argv=None) -> None:
         print(f"{batch:>6} {r['compile_s']:>10.1f} {r['env_steps_per_s']:>12.0f} {r['physics_steps_per_s']:>16.0f} "
               f"{r['physics_steps_per_s'] / c_rate:>20.0%}")
     print(f"MuJoCo C single-thread (mujoco.rollout): {c_rate:.0f} physics steps/s")
+    for steps in (15, 60):
+        pos, joint = solver_error(env, steps)
+        print(f"solver accuracy after {steps * env.dt:.2f} s of a gait: torso {pos * 1000:.1f} mm, joints {joint:.3f} rad "
+              f"from iterations={robot.TIGHT_SOLVER['iterations']}, ls_iterations={robot.TIGHT_SOLVER['ls_iterations']}")
 
 
 if __name__ == "__main__":

@@ -199,8 +199,9 @@ class HexapodEnv(Env):
         return jp.concatenate([data.qpos[:3], data.qpos[3:7], data.qvel[:3], angvel_world,
                                data.qpos[7:], data.qvel[6:], goal_vec, jp.linalg.norm(goal_vec)[None]])
 
-    def _contact_counts(self, data):
-        """(bad leg contacts, non-foot contacts) with the floor, from MJX's contact arrays."""
+    def contact_counts(self, data: mjx.Data):
+        """Floor contacts of a physics state: (leg contacts while that leg's foot is lifted
+        more than `lift_clearance`, contacts of any non-foot geom), from MJX's contact arrays."""
         geom1, geom2, dist = floor_contacts(data)
         on_floor = (dist < 0) & ((geom1 == self._floor) | (geom2 == self._floor))
         other = jp.where(geom1 == self._floor, geom2, geom1)
@@ -216,7 +217,7 @@ class HexapodEnv(Env):
         goal_dir = self._goal - xy
         goal_dir = goal_dir / jp.maximum(jp.linalg.norm(goal_dir), 1e-6)
         roll, pitch = roll_pitch(data.qpos[3:7])
-        bad, non_foot = self._contact_counts(data)
+        bad, non_foot = self.contact_counts(data)
         dist_prev, dist = self._distance(prev), self._distance(data)
         # Inputs of every term; XLA drops whatever the active terms do not use.
         inputs = {

@@ -1,0 +1,21 @@
+"""Session fixtures: every jitted function is compiled once for the whole suite."""
+
+import jax
+import pytest
+
+import hexa_mjx
+
+
+@pytest.fixture(scope="session")
+def env():
+    return hexa_mjx.make_env()
+
+
+@pytest.fixture(scope="session")
+def step(env):
+    return jax.jit(env.step)
+
+
+@pytest.fixture(scope="session")
+def state0(env):
+    return jax.jit(env.reset)(jax.random.PRNGKey(0))

@@ -1,0 +1,204 @@
+"""The MJX environment: shapes, batching, actions, contacts, termination, episode boundaries."""
+
+import jax
+import jax.numpy as jp
+import mujoco
+import numpy as np
+import pytest
+from brax.envs.wrappers import training as brax_training
+from mujoco import mjx
+
+import hexa_mjx
+from hexa_mjx import rewards, robot
+from hexa_mjx.benchmark import c_rollout, gait_actions
+
+FLIPPED = jp.array([0.0, 1.0, 0.0, 0.0])  # 180 degrees about x: upside down
+
+
+def test_sizes_and_dtypes(env, state0):
+    assert (env.observation_size, env.action_size) == (52, 18)
+    assert state0.obs.shape == (52,) and state0.obs.dtype == jp.float32
+    assert state0.reward.shape == () and state0.done.shape == ()
+    # The report's order: position, quaternion, lin vel, ang vel, joint pos, joint vel, goal vector, distance.
+    qpos = np.asarray(state0.pipeline_state.qpos)
+    np.testing.assert_allclose(state0.obs[:7], qpos[:7], atol=1e-6)
+    np.testing.assert_allclose(state0.obs[13:31], qpos[7:], atol=1e-6)
+    np.testing.assert_allclose(state0.obs[49:51], [1.5 - qpos[0], -qpos[1]], atol=1e-6)
+    assert state0.obs[51] == pytest.approx(np.hypot(1.5 - qpos[0], qpos[1]), abs=1e-6)
+
+
+def test_start_pose_rests_on_feet(env, state0):
+    data = state0.pipeline_state
+    bad, non_foot = env.contact_counts(data)
+    assert int(bad) == 0 and int(non_foot) == 0
+    geom1, geom2, dist = hexa_mjx.env.floor_contacts(data)
+    feet = {env.mj_model.geom(robot.foot_geom(leg)).id for leg in robot.LEGS}
+    touching = {int(g) for g, d in zip(np.asarray(geom2), np.asarray(dist)) if d < 0}
+    assert touching == feet  # all six feet down, nothing else
+    assert float(dist.min()) > -0.005  # resting, not sunk into the floor
+    assert abs(float(data.qvel[2])) < 0.05  # settled
+
+
+def test_jit_vmap_batch(env):
+    batch = 3
+    states = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(1), batch))
+    actions = jax.random.uniform(jax.random.PRNGKey(2), (batch, env.action_size), minval=-1, maxval=1)
+    nxt = jax.jit(jax.vmap(env.step))(states, actions)
+    assert nxt.obs.shape == (batch, 52) and nxt.reward.shape == (batch,)
+    assert np.isfinite(np.asarray(nxt.obs)).all() and np.isfinite(np.asarray(nxt.reward)).all()
+    assert not np.allclose(nxt.obs, states.obs)
+    assert set(nxt.metrics) >= {"distance", "success", "fell", "nonfinite"} | {
+        f"reward/{t}" for t, s in env.scales.items() if s}
+
+
+@pytest.mark.parametrize("value", [-1.0, 0.0, 1.0, 7.0])
+def test_action_maps_to_joint_limits(env, step, state0, value):
+    lo, hi = env.mj_model.actuator_ctrlrange.T
+    expected = {-1.0: lo, 0.0: (lo + hi) / 2, 1.0: hi, 7.0: hi}[value]  # out of range is clipped
+    nxt = step(state0, jp.full(env.action_size, value))
+    np.testing.assert_allclose(nxt.pipeline_state.ctrl, expected, atol=1e-6)
+    joint_lo, joint_hi = env.mj_model.jnt_range[1:].T
+    np.testing.assert_allclose(lo, joint_lo)
+    np.testing.assert_allclose(hi, joint_hi)
+
+
+def test_wrong_action_shape_is_rejected(env, state0):
+    with pytest.raises(ValueError, match=r"action must have shape \(18,\)"):
+        env.step(state0, jp.zeros(17))
+
+
+@pytest.fixture(scope="session")
+def counts_at(env, state0):
+    """Contact counts of the start state with qpos replaced (one compile for all poses)."""
+    fn = jax.jit(lambda qpos: env.contact_counts(mjx.forward(env.mjx_model, state0.pipeline_state.replace(qpos=qpos))))
+    return lambda qpos: tuple(int(x) for x in fn(jp.asarray(qpos, jp.float32)))
+
+
+def _c_contacts(env, qpos):
+    """Floor contacts MuJoCo C finds for a pose: list of (geom name, foot clearance of its leg or None)."""
+    m, d = env.mj_model, mujoco.MjData(env.mj_model)
+    d.qpos[:] = qpos
+    mujoco.mj_forward(m, d)
+    out = []
+    for c in d.contact[: d.ncon]:
+        geom = int(c.geom[1])
+        leg, body = None, m.geom_bodyid[geom]
+        while leg is None and body > 0:  # the leg whose joint moves this body
+            joints = [m.joint(j).name for j in range(m.njnt) if m.jnt_bodyid[j] == body]
+            leg = next((j.split("_")[0] for j in joints if j.startswith("leg")), None)
+            body = m.body_parentid[body]
+        clear = None
+        if leg is not None:
+            foot = m.geom(robot.foot_geom(leg)).id
+            clear = d.geom_xpos[foot, 2] - m.geom_size[foot, 0]
+        out.append((m.geom(geom).name, clear))
+    return out
+
+
+def test_body_contact_when_torso_lies_on_floor(env, counts_at):
+    qpos = np.array(env.mj_model.key_qpos[0])
+    qpos[2], qpos[3:7] = 0.0, FLIPPED  # on its back, legs in the air
+    c_names = [name for name, _ in _c_contacts(env, qpos)]
+    assert robot.TORSO_GEOM in c_names and not any(n.endswith("_foot") for n in c_names)
+    bad, non_foot = counts_at(qpos)
+    assert non_foot == len(c_names) > 0
+    standing = counts_at(env.mj_model.key_qpos[0])
+    assert standing == (0, 0)
+
+
+def test_contact_quality_when_leg_links_touch_with_feet_lifted(env, counts_at):
+    # Kneeling: knees folded so every femur/shin rests on the floor and every foot is in the air.
+    qpos = np.array(env.mj_model.key_qpos[0])
+    qpos[2] = 0.1
+    qpos[8::3], qpos[9::3] = -1.5, -1.0
+    c = _c_contacts(env, qpos)
+    assert c and all(clear is not None and clear > 0.02 for _, clear in c)  # leg links only, feet up
+    bad, non_foot = counts_at(qpos)
+    assert bad == non_foot == len(c)
+
+
+def test_mjx_matches_mujoco_c(env, step, state0):
+    actions = gait_actions(15, env.dt)
+    expected = c_rollout(env, env.mj_model, actions)
+    state, got = state0, []
+    for a in actions:
+        state = step(state, jp.asarray(a, jp.float32))
+        got.append(np.asarray(state.pipeline_state.qpos))
+    got = np.array(got)
+    assert np.abs(expected[-1, :3] - expected[0, :3]).max() > 0.005  # the gait really moves the torso
+    np.testing.assert_allclose(got[:, :3], expected[:, :3], atol=0.01)  # m
+    np.testing.assert_allclose(got[:, 7:], expected[:, 7:], atol=0.1)  # rad
+
+
+def test_flipped_robot_terminates(env, step, state0):
+    ps = state0.pipeline_state
+    flipped = state0.replace(pipeline_state=ps.replace(qpos=ps.qpos.at[2].set(0.3).at[3:7].set(FLIPPED)))
+    nxt = step(flipped, jp.zeros(env.action_size))
+    assert float(nxt.done) == 1.0 and float(nxt.metrics["fell"]) == 1.0
+    assert float(nxt.metrics["reward/termination"]) == -200.0
+    upright = step(state0, jp.zeros(env.action_size))
+    assert float(upright.done) == 0.0 and float(upright.metrics["reward/termination"]) == 0.0
+
+
+def test_nan_state_terminates_with_finite_outputs(env, step, state0):
+    ps = state0.pipeline_state
+    broken = state0.replace(pipeline_state=ps.replace(qvel=ps.qvel.at[4].set(jp.nan)))
+    nxt = step(broken, jp.zeros(env.action_size))
+    assert float(nxt.done) == 1.0 and float(nxt.metrics["nonfinite"]) == 1.0
+    assert np.isfinite(np.asarray(nxt.obs)).all() and np.isfinite(float(nxt.reward))
+    assert all(np.isfinite(np.asarray(v)).all() for v in nxt.metrics.values())
+
+
+def test_episode_boundary_under_brax_autoreset(env):
+    """brax's AutoResetWrapper keeps `info`: the env must not leak episode state across it."""
+    wrapped = brax_training.wrap(env, episode_length=env.config.episode_length)
+    reset, step = jax.jit(wrapped.reset), jax.jit(wrapped.step)
+    state = reset(jax.random.split(jax.random.PRNGKey(0), 2))
+    last = env.config.episode_length - 2
+    ps = state.pipeline_state
+    near_goal = ps.replace(qpos=ps.qpos.at[:, 0].set(1.2))  # 0.3 m from the goal
+    state = state.replace(pipeline_state=near_goal, info={**state.info, "steps": state.info["steps"] + last,
+                                                          "t": state.info["t"] + last})
+    zeros = jp.zeros((2, env.action_size))
+    state = step(state, zeros)  # second-to-last step: inside the goal radius
+    assert np.all(np.asarray(state.metrics["success"]) == 1.0) and np.all(np.asarray(state.done) == 0)
+    state = step(state, zeros)  # last step: truncated and reset
+    assert np.all(np.asarray(state.done) == 1) and np.all(np.asarray(state.info["truncation"]) == 1)
+    np.testing.assert_allclose(state.pipeline_state.qpos[:, 0], env._qpos0[0], atol=1e-6)
+    assert np.all(np.asarray(state.info["t"]) == 0) and np.all(np.asarray(state.info["success"]) == 0)
+    state = step(state, zeros)  # first step of the new episode
+    # A stale previous distance would give 1000 * (0.3 - 1.5) = -1200 here.
+    assert np.all(np.abs(np.asarray(state.metrics["reward/goal_approach"])) < 20)
+    assert np.all(np.asarray(state.metrics["success"]) == 0)
+
+
+def test_every_variant_and_ablation_builds():
+    for reward in rewards.VARIANTS:
+        for ablation in [None, *rewards.ABLATIONS]:
+            env = hexa_mjx.make_env(reward, ablate=() if ablation is None else ablation)
+            active = {t for t, s in env.scales.items() if s}
+            dropped = set(rewards.ABLATIONS.get(ablation, ()))
+            assert not active & dropped
+            if reward == "forward_motion":
+                assert not active & {"goal_approach", "velocity_alignment", "goal_bonus"}
+
+
+def test_forward_motion_logs_its_own_terms():
+    env = hexa_mjx.make_env("forward_motion", ablate=["velocity"])
+    state = jax.jit(env.step)(jax.jit(env.reset)(jax.random.PRNGKey(0)), jp.zeros(env.action_size))
+    assert "reward/forward_progress" in state.metrics
+    assert not {"reward/goal_approach", "reward/goal_bonus", "reward/forward_velocity"} & set(state.metrics)
+    total = sum(float(v) for k, v in state.metrics.items() if k.startswith("reward/"))
+    assert float(state.reward) == pytest.approx(total, rel=1e-5, abs=1e-6)
+
+
+def test_bad_settings_give_clear_errors():
+    with pytest.raises(ValueError, match="unknown reward 'fast'"):
+        hexa_mjx.make_env("fast")
+    with pytest.raises(TypeError, match=r"unknown environment setting\(s\) \['ctrl_rate'\]"):
+        hexa_mjx.make_env(ctrl_rate=50)
+    with pytest.raises(ValueError, match="ctrl_hz=50 is not the 240 Hz physics rate divided by a whole number"):
+        hexa_mjx.make_env(ctrl_hz=50)
+    with pytest.raises(ValueError, match="unknown ablation"):
+        hexa_mjx.make_env(ablate="legs")
+    assert hexa_mjx.make_env(ctrl_hz=30).n_substeps == 8

@@ -1,0 +1,76 @@
+"""Reward terms as pure functions, and the variant/ablation scale tables."""
+
+import jax.numpy as jp
+import numpy as np
+import pytest
+
+from hexa_mjx import rewards
+
+
+def scaled(term, *args, reward="goal_directed"):
+    return rewards.VARIANTS[reward][term] * float(rewards.TERMS[term](*args))
+
+
+def test_one_cm_toward_goal_gives_ten():
+    assert scaled("goal_approach", jp.float32(1.50), jp.float32(1.49)) == pytest.approx(10.0, rel=1e-4)
+    assert scaled("goal_approach", jp.float32(1.49), jp.float32(1.50)) == pytest.approx(-10.0, rel=1e-4)
+
+
+def test_velocity_alignment_is_speed_toward_goal():
+    goal_dir = jp.array([1.0, 0.0])
+    assert scaled("velocity_alignment", jp.array([0.2, 0.0]), goal_dir) == pytest.approx(1.0)
+    assert scaled("velocity_alignment", jp.array([0.0, 0.3]), goal_dir) == pytest.approx(0.0)
+    assert scaled("velocity_alignment", jp.array([-0.2, 0.0]), goal_dir) == pytest.approx(-1.0)
+    # 5 * |v| * cos(45 deg) for a diagonal velocity
+    assert scaled("velocity_alignment", jp.array([0.1, 0.1]), goal_dir) == pytest.approx(5 * np.hypot(0.1, 0.1) * np.cos(np.pi / 4))
+
+
+def test_goal_bonus_only_inside_radius():
+    assert scaled("goal_bonus", jp.float32(0.49), 0.5) == 100.0
+    assert scaled("goal_bonus", jp.float32(0.51), 0.5) == 0.0
+
+
+def test_shaping_penalties():
+    assert scaled("stability", jp.float32(0.1), jp.float32(-0.2)) == pytest.approx(-0.15)
+    assert scaled("height", jp.float32(0.22), 0.12) == pytest.approx(-0.2)
+    assert scaled("height", jp.float32(0.02), 0.12) == pytest.approx(-0.2)
+    assert scaled("energy", jp.full(18, 2.0)) == pytest.approx(-1e-4 * 18 * 4)
+    assert scaled("contact_quality", jp.int32(3)) == pytest.approx(-1.5)
+    assert scaled("body_contact", jp.int32(2)) == pytest.approx(-2.0)
+    assert scaled("termination", jp.bool_(True)) == -200.0
+    assert scaled("termination", jp.bool_(False)) == 0.0
+
+
+def test_forward_motion_terms():
+    # 1000 * d_moved * cos(theta): 2 cm at 60 degrees off +x gives 1 cm of forward progress
+    prev, now = jp.array([0.0, 0.0]), jp.array([0.02 * np.cos(np.pi / 3), 0.02 * np.sin(np.pi / 3)])
+    assert scaled("forward_progress", prev, now, reward="forward_motion") == pytest.approx(10.0, rel=1e-4)
+    assert scaled("forward_velocity", jp.array([0.3, 0.5]), reward="forward_motion") == pytest.approx(1.5)
+
+
+def test_variants_differ_only_in_task_terms():
+    goal, forward = rewards.VARIANTS["goal_directed"], rewards.VARIANTS["forward_motion"]
+    assert set(goal) == set(forward) == set(rewards.TERMS)
+    differing = {k for k in goal if goal[k] != forward[k]}
+    assert differing == {"goal_approach", "velocity_alignment", "goal_bonus", "forward_progress", "forward_velocity"}
+    assert forward["goal_bonus"] == 0.0
+
+
+@pytest.mark.parametrize("reward", sorted(rewards.VARIANTS))
+@pytest.mark.parametrize("ablation", sorted(rewards.ABLATIONS))
+def test_ablation_zeroes_exactly_its_terms(reward, ablation):
+    full = rewards.make_scales(reward)
+    ablated = rewards.make_scales(reward, ablate=[ablation])
+    for term in full:
+        expected = 0.0 if term in rewards.ABLATIONS[ablation] else full[term]
+        assert ablated[term] == expected, term
+
+
+def test_scale_overrides_and_errors():
+    assert rewards.make_scales("goal_directed", overrides={"height": -5})["height"] == -5.0
+    with pytest.raises(ValueError, match="unknown reward 'sideways'"):
+        rewards.make_scales("sideways")
+    with pytest.raises(ValueError, match="unknown ablation 'legs'"):
+        rewards.make_scales("goal_directed", ablate=["legs"])
+    with pytest.raises(ValueError, match="unknown reward term 'speed'"):
+        rewards.make_scales("goal_directed", overrides={"speed": 1.0})
