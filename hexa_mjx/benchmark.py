@@ -1,6 +1,6 @@
 """Environment speed: MJX batched env/physics steps per second beside MuJoCo C.
 
-    python -m hexa_mjx.benchmark [--batches 64 256 1024] [--steps 100] [--repeats 3]
+    python -m hexa_mjx.benchmark [--batches 64 256 1024] [--steps 100] [--repeats 3] [--compare_solver 4 8]
 
 Prints compile time, then for each batch size the median over repeats of env
 steps/s and physics steps/s (env steps x substeps) under random actions, then
@@ -111,6 +111,8 @@ def main(argv=None) -> None:
     parser.add_argument("--steps", type=int, default=100, help="control steps per timed rollout")
     parser.add_argument("--repeats", type=int, default=3, help="timed rollouts per batch size (median reported)")
     parser.add_argument("--ctrl_hz", type=float, default=60.0, help="control rate, Hz")
+    parser.add_argument("--compare_solver", type=int, nargs=2, metavar=("ITERATIONS", "LS_ITERATIONS"),
+                        help="also time this solver setting at the largest batch, beside the model's own")
     args = parser.parse_args(argv)
 
     env = hexa_mjx.make_env(ctrl_hz=args.ctrl_hz)
@@ -125,6 +127,12 @@ def main(argv=None) -> None:
         print(f"{batch:>6} {r['compile_s']:>10.1f} {r['env_steps_per_s']:>12.0f} {r['physics_steps_per_s']:>16.0f} "
               f"{r['physics_steps_per_s'] / c_rate:>20.0%}")
     print(f"MuJoCo C single-thread (mujoco.rollout): {c_rate:.0f} physics steps/s")
+    if args.compare_solver:
+        it, ls = args.compare_solver
+        other = hexa_mjx.make_env(ctrl_hz=args.ctrl_hz, solver_iterations=it, ls_iterations=ls)
+        r = mjx_speed(other, args.batches[-1], args.steps, args.repeats)
+        print(f"solver iterations={it} ls_iterations={ls}: {r['physics_steps_per_s']:.0f} physics steps/s "
+              f"at {args.batches[-1]} envs ({r['physics_steps_per_s'] / c_rate:.0%} of MuJoCo C 1-thread)")
     for steps in (15, 60):
         pos, joint = solver_error(env, steps)
         print(f"solver accuracy after {steps * env.dt:.2f} s of a gait: torso {pos * 1000:.1f} mm, joints {joint:.3f} rad "
