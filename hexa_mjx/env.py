@@ -26,6 +26,10 @@ from mujoco import mjx
 from hexa_mjx import rewards, robot
 
 
+# The goal bonus per step in the goal, logged for every reward variant so they can be compared.
+REPORT_GOAL_BONUS = rewards.VARIANTS["goal_directed"]["goal_bonus"]
+
+
 @dataclasses.dataclass(frozen=True)
 class EnvConfig:
     """Environment settings; `make_env(**overrides)` sets any of them by name."""
@@ -147,7 +151,8 @@ class HexapodEnv(Env):
         data = mjx.forward(self.mjx_model, data)
         zero = jp.zeros(())
         metrics = {f"reward/{name}": zero for name in self._active_terms()}
-        metrics.update(distance=self._distance(data), success=zero, fell=zero, nonfinite=zero)
+        metrics.update(distance=self._distance(data), success=zero, fell=zero, nonfinite=zero, goal_bonus=zero,
+                       final_distance=zero, final_success=zero)
         info = {"rng": rng, "t": jp.zeros((), jp.int32), "success": zero}
         return State(data, self._obs(data), zero, zero, metrics, info)
 
@@ -179,9 +184,13 @@ class HexapodEnv(Env):
         t = state.info["t"] + 1
         over = done | (t >= self.config.episode_length)
         info = {**state.info, "t": jp.where(over, 0, t), "success": jp.where(over, 0.0, success)}
-        metrics = {f"reward/{name}": value for name, value in scaled.items()}
+        # Start from the incoming metrics: wrappers (brax's evaluator) add keys of their own.
+        metrics = {**state.metrics, **{f"reward/{name}": value for name, value in scaled.items()}}
+        # Per-step values whose sums over an episode are the per-episode figures brax's evaluator reports.
         metrics.update(distance=dist, success=success, fell=fell.astype(jp.float32),
-                       nonfinite=(~finite).astype(jp.float32))
+                       nonfinite=(~finite).astype(jp.float32),
+                       goal_bonus=REPORT_GOAL_BONUS * rewards.goal_bonus(dist, self.config.success_radius),
+                       final_distance=jp.where(over, dist, 0.0), final_success=jp.where(over, success, 0.0))
         return state.replace(pipeline_state=data, obs=self._obs(data), reward=reward,
                              done=done.astype(jp.float32), metrics=metrics, info=info)
 

@@ -1,0 +1,147 @@
+"""train.py and eval.py end to end (tiny budgets, in subprocesses), checkpoints, and bad input."""
+
+import dataclasses
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import imageio.v2 as imageio
+import jax
+import numpy as np
+import pytest
+
+from hexa_mjx import evaluation, training
+
+ROOT = Path(__file__).resolve().parent.parent
+# A tiny rollout shape: 8 envs x 4 steps x 2 minibatches = 64 env steps per update.
+TINY = ["--num_envs", "8", "--batch_size", "8", "--num_minibatches", "2", "--unroll_length", "4",
+        "--num_evals", "2", "--num_eval_envs", "2", "--episode_length", "20"]
+
+
+@pytest.fixture(scope="session")
+def cache_env(tmp_path_factory):
+    """Subprocess environment sharing one fresh XLA compilation cache (later runs reuse compiles)."""
+    return {**os.environ, "JAX_COMPILATION_CACHE_DIR": str(tmp_path_factory.mktemp("xla_cache"))}
+
+
+def run(script, *args, env=None, check=True):
+    proc = subprocess.run([sys.executable, str(ROOT / script), *args], capture_output=True, text=True,
+                          cwd=ROOT, env=env, timeout=900)
+    if check and proc.returncode != 0:
+        raise AssertionError(f"{script} {' '.join(args)} failed ({proc.returncode}):\n{proc.stdout}\n{proc.stderr}")
+    return proc
+
+
+@pytest.fixture(scope="session")
+def trained(tmp_path_factory, cache_env):
+    run_dir = tmp_path_factory.mktemp("runs") / "tiny"
+    proc = run("train.py", *TINY, "--num_timesteps", "64", "--seed", "3", "--run_dir", str(run_dir), env=cache_env)
+    return run_dir, proc
+
+
+def rows(run_dir):
+    return [json.loads(line) for line in (run_dir / "metrics.jsonl").read_text().splitlines()]
+
+
+def test_train_writes_run_directory(trained):
+    run_dir, proc = trained
+    assert [r["step"] for r in rows(run_dir)] == [0, 64]
+    assert {"episode_return", "final_distance", "success_rate", "goal_bonus", "fall_rate"} <= set(rows(run_dir)[-1])
+    assert [step for step, _ in training.list_checkpoints(run_dir)] == [64]
+    assert list((run_dir / "tb").glob("events.out.tfevents.*"))
+    assert "success" in proc.stdout and "steps/s" in proc.stdout and "done:" in proc.stdout
+
+
+def test_saved_config_round_trips(trained):
+    run_dir, _ = trained
+    saved = training.load_config(run_dir)
+    flags = training.parse_args([*TINY, "--num_timesteps", "64", "--seed", "3", "--run_dir", str(run_dir)])
+    assert saved == flags
+    assert saved.seed == 3 and saved.hidden == [256, 256] and saved.discount == 0.99
+
+
+def test_resume_continues_step_count(trained, cache_env, tmp_path):
+    run_dir, _ = trained
+    resumed = tmp_path / "resumed"
+    subprocess.run(["cp", "-r", str(run_dir), str(resumed)], check=True)
+    # A checkpoint interrupted mid-write (killed before its rename) must be ignored.
+    (resumed / "checkpoints" / "tmp-000000000128-999").mkdir()
+    proc = run("train.py", *TINY, "--num_timesteps", "128", "--seed", "3", "--run_dir", str(resumed), "--resume",
+               env=cache_env)
+    assert "resuming" in proc.stdout and "from step 64" in proc.stdout
+    assert [r["step"] for r in rows(resumed)] == [0, 64, 128]
+    assert [step for step, _ in training.list_checkpoints(resumed)] == [64, 128]
+
+
+def test_checkpoint_restores_same_actions(tmp_path):
+    cfg = training.TrainConfig(hidden=[32, 32])
+    env = training.make_env_for(cfg)
+    normalizer, policy, value = training.init_params(cfg, env)
+    key = jax.random.PRNGKey(7)
+    # Non-trivial normalizer statistics, so a normalizer lost in saving would change the actions.
+    normalizer = normalizer.replace(mean=jax.random.normal(key, normalizer.mean.shape),
+                                    std=1 + jax.random.uniform(key, normalizer.std.shape))
+    params = (normalizer, policy, value)
+    obs = jax.random.normal(jax.random.PRNGKey(1), (5, env.observation_size))
+    before = training.make_inference(cfg, env, params)(obs, key)
+    path = training.save_checkpoint(tmp_path, 1234, params)
+    step, restored = training.load_checkpoint(path, training.init_params(cfg, env))
+    after = training.make_inference(cfg, env, restored)(obs, key)
+    assert step == 1234
+    np.testing.assert_array_equal(np.asarray(before), np.asarray(after))
+    fresh = training.make_inference(cfg, env, training.init_params(dataclasses.replace(cfg, seed=1), env))(obs, key)
+    assert not np.allclose(before, fresh)  # the comparison can tell different params apart
+
+
+def test_eval_writes_video_and_metrics(trained, cache_env, tmp_path):
+    run_dir, _ = trained
+    out = tmp_path / "eval"
+    proc = run("eval.py", "--ckpt", str(run_dir), "--episodes", "3", "--out", str(out), env=cache_env)
+    assert "success rate" in proc.stdout and "fall rate" in proc.stdout
+    result = json.loads((out / "metrics.json").read_text())
+    assert result["step"] == 64 and result["summary"]["episodes"] == 3
+    assert {"success_rate", "final_distance_mean", "final_distance_median", "min_distance_mean", "goal_bonus_mean",
+            "return_mean", "fall_rate", "mean_speed"} <= set(result["summary"])
+    assert result["summary"]["min_distance_mean"] <= result["summary"]["final_distance_mean"]
+    video = out / "episode_0.mp4"
+    assert video.stat().st_size > 1000
+    frames = np.array([f for f in imageio.get_reader(video)])
+    assert len(frames) == 21  # start frame + 20 control steps
+    assert np.abs(frames[0].astype(float) - frames[-1].astype(float)).mean() > 1.0  # the picture changes
+
+
+def test_train_rejects_bad_input(trained, tmp_path):
+    run_dir, _ = trained
+    proc = run("train.py", "--num_envs", "100", "--run_dir", str(tmp_path / "a"), check=False)
+    assert proc.returncode == 2 and "--num_envs 100 does not fit the batch shape" in proc.stderr
+    proc = run("train.py", "--reward", "sideways", check=False)
+    assert proc.returncode == 2 and "invalid choice: 'sideways'" in proc.stderr
+    proc = run("train.py", "--ablate", "legs", check=False)
+    assert proc.returncode == 2 and "invalid choice: 'legs'" in proc.stderr
+    proc = run("train.py", *TINY, "--run_dir", str(run_dir), check=False)
+    assert proc.returncode == 2 and "already holds a run; pass --resume" in proc.stderr
+    proc = run("train.py", *TINY, "--seed", "4", "--run_dir", str(run_dir), "--resume", check=False)
+    assert proc.returncode == 2 and "holds a different run: seed=3" in proc.stderr
+    assert not (tmp_path / "a").exists()
+
+
+def test_eval_rejects_corrupted_checkpoint(trained, tmp_path):
+    run_dir, _ = trained
+    broken = tmp_path / "broken"
+    subprocess.run(["cp", "-r", str(run_dir), str(broken)], check=True)
+    (ckpt,) = [p for _, p in training.list_checkpoints(broken)]
+    for f in (ckpt / "params").rglob("*"):
+        if f.is_file():
+            f.write_bytes(b"garbage")
+    proc = run("eval.py", "--ckpt", str(broken), "--no-video", check=False)
+    assert proc.returncode == 2 and "is unreadable" in proc.stderr and "use an earlier checkpoint" in proc.stderr
+    proc = run("eval.py", "--ckpt", str(tmp_path / "nowhere"), check=False)
+    assert proc.returncode == 2 and "neither a run directory" in proc.stderr
+
+
+def test_missing_opengl_names_the_package(env, monkeypatch, tmp_path):
+    monkeypatch.delenv("MUJOCO_GL", raising=False)
+    with pytest.raises(RuntimeError, match="apt-get install libegl1 libegl-mesa0 libosmesa6"):
+        evaluation.render_video(env, np.zeros((2, env.mj_model.nq)), tmp_path / "x.mp4")

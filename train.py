@@ -1,0 +1,32 @@
+"""Train a hexapod to walk to a goal with Brax PPO on MuJoCo MJX.
+
+    python train.py --num_envs 256
+    python train.py --preset paper --seed 1
+    python train.py --run_dir runs/goal_directed-s0 --resume
+
+Flags and defaults: `python train.py --help` (hexa_mjx/training.py, TrainConfig).
+"""
+
+import sys
+
+from hexa_mjx import training
+
+
+def main(argv=None) -> int:
+    cfg = training.parse_args(argv)
+    training.enable_compile_cache()
+    try:
+        training.validate(cfg)
+    except (training.ConfigError, ValueError, TypeError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    try:
+        training.train(cfg)
+    except KeyboardInterrupt:
+        print("\ninterrupted: the last complete checkpoint is kept; continue with --resume", file=sys.stderr)
+        return 130
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
