@@ -10,7 +10,7 @@ Runs N episodes with the deterministic policy batched on MJX, prints a table, wr
 import argparse
 import sys
 
-from hexa_mjx import evaluation, training
+from hexa_mjx import evaluation
 
 
 def main(argv=None) -> int:
@@ -22,7 +22,6 @@ def main(argv=None) -> int:
     parser.add_argument("--out", default=None, help="output folder (default: <run dir>/eval)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
     args = parser.parse_args(argv)
-    training.enable_compile_cache()
     if args.episodes < 1:
         parser.error("--episodes must be at least 1")
     try:

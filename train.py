@@ -14,7 +14,6 @@ from hexa_mjx import training
 
 def main(argv=None) -> int:
     cfg = training.parse_args(argv)
-    training.enable_compile_cache()
     try:
         training.validate(cfg)
     except (training.ConfigError, ValueError, TypeError) as e:

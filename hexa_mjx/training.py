@@ -107,14 +107,6 @@ def parse_args(argv=None) -> TrainConfig:
     return dataclasses.replace(TrainConfig(), **{**preset, **explicit})
 
 
-def enable_compile_cache() -> None:
-    """Keep XLA executables on disk so a second run (a resume, an eval) skips most compiling.
-    JAX_COMPILATION_CACHE_DIR chooses the folder; the default is ~/.cache/hexa_mjx/jax."""
-    folder = os.environ.get("JAX_COMPILATION_CACHE_DIR") or str(Path.home() / ".cache" / "hexa_mjx" / "jax")
-    jax.config.update("jax_compilation_cache_dir", folder)
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
-
-
 def default_run_dir(cfg: TrainConfig) -> Path:
     ablations = "".join(f"-no_{a}" for a in sorted(cfg.ablate))
     return Path("runs") / f"{cfg.reward}{ablations}-s{cfg.seed}"
