@@ -64,7 +64,13 @@ class TrainConfig:
     max_grad_norm: float = dataclasses.field(default=0.5, metadata={"help": "gradient clipping norm"})
     hidden: list = dataclasses.field(default_factory=lambda: [256, 256], metadata={
         "help": "hidden layer sizes of actor and critic", "nargs": "+", "type": int})
-    reward_scaling: float = dataclasses.field(default=1.0, metadata={"help": "constant reward factor"})
+    reward_scaling: float = dataclasses.field(default=0.01, metadata={
+        "help": "constant reward factor (stands in for the report's reward normalization)"})
+    policy_dist: str = dataclasses.field(default="normal", metadata={
+        "help": "action distribution: 'normal' (CleanRL's Gaussian, clipped by the env) or brax's 'tanh_normal'",
+        "choices": ["normal", "tanh_normal"]})
+    mean_init_scale: float = dataclasses.field(default=0.01, metadata={
+        "help": "init scale of the policy mean's output layer (CleanRL: 0.01, so early actions are near 0)"})
     episode_length: int = dataclasses.field(default=1000, metadata={"help": "control steps per episode"})
     num_eval_envs: int = dataclasses.field(default=32, metadata={
         "help": "episodes per evaluation (deterministic policy)"})
@@ -153,8 +159,13 @@ def network_factory(cfg: TrainConfig):
     """brax's PPO network factory with the config's layer sizes and tanh activations."""
     from brax.training.agents.ppo import networks as ppo_networks
 
+    # CleanRL's actor: state-independent log std starting at std 1, a small output layer for the mean.
     return functools.partial(ppo_networks.make_ppo_networks, policy_hidden_layer_sizes=tuple(cfg.hidden),
-                             value_hidden_layer_sizes=tuple(cfg.hidden), activation=linen.tanh)
+                             value_hidden_layer_sizes=tuple(cfg.hidden), activation=linen.tanh,
+                             distribution_type=cfg.policy_dist, noise_std_type="log", init_noise_std=1.0,
+                             mean_kernel_init_fn=jax.nn.initializers.variance_scaling,
+                             mean_kernel_init_kwargs={"scale": cfg.mean_init_scale ** 2, "mode": "fan_in",
+                                                      "distribution": "uniform"})
 
 
 def make_networks(cfg: TrainConfig, env):
@@ -293,7 +304,7 @@ class Logger:
             if key != "step" and isinstance(value, float) and math.isfinite(value):
                 self.tb.add_scalar(key.replace("eval/episode_", ""), value, step)
         self.tb.flush()
-        left = (self.cfg.num_timesteps - step) / rate if math.isfinite(rate) and rate > 0 else math.nan
+        left = max(self.cfg.num_timesteps - step, 0) / rate if math.isfinite(rate) and rate > 0 else math.nan
         print(f"step {step:>9,}/{self.cfg.num_timesteps:,}  {rate:7.0f} steps/s  left {_fmt_time(left)}  "
               f"return {row['episode_return']:8.1f}  distance {row['final_distance']:.2f} m  "
               f"success {row['success_rate']:.0%}  goal bonus {row['goal_bonus']:7.1f}  "

@@ -1,0 +1,62 @@
+"""Learning curves from run directories' metrics.jsonl.
+
+    python -m hexa_mjx.plots runs/goal_directed-s0 runs/goal_directed-s1 -o docs/img/curves.png
+
+One panel per figure (final distance to goal, success rate, episodic return, goal bonus)
+against environment steps, one line per run, labelled by the run directory's name.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+PANELS = [("final_distance", "distance to goal at episode end (m)"), ("success_rate", "success rate"),
+          ("episode_return", "episodic return"), ("goal_bonus", "goal bonus per episode")]
+
+
+def read_metrics(run_dir: Path) -> list[dict]:
+    path = Path(run_dir) / "metrics.jsonl"
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} not found: is {run_dir} a train.py run directory?")
+    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+
+
+def plot_runs(run_dirs: list[Path], out: Path, title: str = "") -> Path:
+    """Write a 2x2 PNG of the PANELS for each run."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(2, 2, figsize=(11, 7), constrained_layout=True)
+    for run_dir in run_dirs:
+        rows = read_metrics(run_dir)
+        steps = [r["step"] for r in rows]
+        for ax, (key, label) in zip(axes.flat, PANELS):
+            ax.plot(steps, [r.get(key, float("nan")) for r in rows], marker="o", ms=3, label=Path(run_dir).name)
+            ax.set_xlabel("environment steps")
+            ax.set_ylabel(label)
+            ax.grid(alpha=0.3)
+    axes.flat[0].axhline(0.5, color="grey", ls="--", lw=1)  # success radius
+    axes.flat[0].legend(fontsize=8)
+    if title:
+        fig.suptitle(title)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(prog="python -m hexa_mjx.plots", description=__doc__.split("\n\n")[0])
+    parser.add_argument("runs", nargs="+", type=Path, help="run directories")
+    parser.add_argument("-o", "--out", type=Path, default=Path("curves.png"), help="PNG to write")
+    parser.add_argument("--title", default="", help="figure title")
+    args = parser.parse_args(argv)
+    print(f"wrote {plot_runs(args.runs, args.out, args.title)}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,26 @@
+"""Learning-curve plots from synthetic metrics files."""
+
+import json
+
+import matplotlib.image as mpimg
+import pytest
+
+from hexa_mjx import plots
+
+
+def test_plot_runs_writes_png(tmp_path):
+    for name, slope in (("a", 1.0), ("b", 0.5)):
+        run = tmp_path / name
+        run.mkdir()
+        rows = [{"step": s, "final_distance": 1.5 - slope * s / 1e6, "success_rate": slope * s / 2e6,
+                 "episode_return": 100 * slope * s / 1e6, "goal_bonus": 10 * s / 1e6} for s in (0, 5e5, 1e6)]
+        (run / "metrics.jsonl").write_text("\n".join(json.dumps(r) for r in rows) + "\n")
+    out = plots.plot_runs([tmp_path / "a", tmp_path / "b"], tmp_path / "img" / "curves.png", title="t")
+    image = mpimg.imread(out)
+    assert image.shape[0] > 300 and image.shape[1] > 500
+    assert image.std() > 0.01  # not blank
+
+
+def test_missing_metrics_is_a_clear_error(tmp_path):
+    with pytest.raises(FileNotFoundError, match="is .* a train.py run directory"):
+        plots.read_metrics(tmp_path)
