@@ -32,7 +32,8 @@ def rollout(env, policy, num_episodes: int, seed: int = 0):
             action = policy(state.obs, key)
             nxt = jax.vmap(env.step)(state, action)
             out = {"qpos": nxt.pipeline_state.qpos, "reward": nxt.reward, "done": nxt.done, "alive": alive,
-                   **{k: nxt.metrics[k] for k in ("distance", "success", "fell", "goal_bonus", "nonfinite")}}
+                   **{k: v for k, v in nxt.metrics.items()
+                      if k.startswith("reward/") or k in ("distance", "fell", "goal_bonus", "nonfinite")}}
             return (nxt, alive * (1.0 - nxt.done)), out
 
         start_qpos = state.pipeline_state.qpos
@@ -75,6 +76,9 @@ def episode_table(env, start_qpos, traj) -> dict:
         "nonfinite_rate": float(per_episode["nonfinite"].mean()),
         "mean_speed": float(per_episode["mean_speed"].mean()),
         "episode_length_mean": float(per_episode["length"].mean()),
+        # Per-episode sums of each scaled reward term, averaged: e.g. body_contact near 0 means no crawling.
+        "reward_terms": {k[len("reward/"):]: float((traj[k] * alive).sum(0).mean())
+                         for k in traj if k.startswith("reward/")},
     }
     return {"summary": summary, "per_episode": {k: v.tolist() for k, v in per_episode.items()}}
 
@@ -88,6 +92,7 @@ def format_table(summary: dict) -> str:
             ("return, mean +- std", f"{summary['return_mean']:.1f} +- {summary['return_std']:.1f}"),
             ("fall rate", f"{summary['fall_rate']:.1%}"), ("mean speed", f"{summary['mean_speed']:.3f} m/s"),
             ("episode length, mean", f"{summary['episode_length_mean']:.0f} steps")]
+    rows += [(f"  reward/{k}, per episode", f"{v:.1f}") for k, v in summary["reward_terms"].items()]
     width = max(len(k) for k, _ in rows)
     return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
 

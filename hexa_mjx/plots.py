@@ -1,6 +1,7 @@
 """Learning curves from run directories' metrics.jsonl.
 
     python -m hexa_mjx.plots runs/goal_directed-s0 runs/goal_directed-s1 -o docs/img/curves.png
+    python -m hexa_mjx.plots --frames runs/goal_directed-s0/eval/episode_0.mp4 -o docs/img/frames.png
 
 One panel per figure (final distance to goal, success rate, episodic return, goal bonus)
 against environment steps, one line per run, labelled by the run directory's name.
@@ -49,13 +50,33 @@ def plot_runs(run_dirs: list[Path], out: Path, title: str = "") -> Path:
     return out
 
 
+def contact_sheet(video: Path, out: Path, count: int = 6, every: int = 40) -> Path:
+    """A row of `count` frames, `every` frames apart, from an MP4 (half size)."""
+    import imageio.v2 as imageio
+    import numpy as np
+
+    wanted = set(range(0, count * every, every))
+    frames = [f[::2, ::2] for i, f in enumerate(imageio.get_reader(video)) if i in wanted]
+    if not frames:
+        raise ValueError(f"{video} has no frames")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    imageio.imwrite(out, np.concatenate(frames, axis=1))
+    return out
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(prog="python -m hexa_mjx.plots", description=__doc__.split("\n\n")[0])
-    parser.add_argument("runs", nargs="+", type=Path, help="run directories")
+    parser.add_argument("runs", nargs="*", type=Path, help="run directories")
+    parser.add_argument("--frames", type=Path, help="instead: a row of frames from this MP4 (every 40th)")
     parser.add_argument("-o", "--out", type=Path, default=Path("curves.png"), help="PNG to write")
     parser.add_argument("--title", default="", help="figure title")
     args = parser.parse_args(argv)
-    print(f"wrote {plot_runs(args.runs, args.out, args.title)}")
+    if args.frames:
+        print(f"wrote {contact_sheet(args.frames, args.out)}")
+    elif args.runs:
+        print(f"wrote {plot_runs(args.runs, args.out, args.title)}")
+    else:
+        parser.error("give run directories or --frames VIDEO")
 
 
 if __name__ == "__main__":

@@ -105,6 +105,9 @@ def test_eval_writes_video_and_metrics(trained, cache_env, tmp_path):
     assert {"success_rate", "final_distance_mean", "final_distance_median", "min_distance_mean", "goal_bonus_mean",
             "return_mean", "fall_rate", "mean_speed"} <= set(result["summary"])
     assert result["summary"]["min_distance_mean"] <= result["summary"]["final_distance_mean"]
+    terms = result["summary"]["reward_terms"]
+    assert {"goal_approach", "body_contact", "contact_quality", "height"} <= set(terms)
+    assert terms["body_contact"] <= 0 and terms["height"] < 0
     video = out / "episode_0.mp4"
     assert video.stat().st_size > 1000
     frames = np.array([f for f in imageio.get_reader(video)])
