@@ -63,6 +63,11 @@ def episode_table(env, start_qpos, traj) -> dict:
         "mean_speed": np.linalg.norm(final_xy - start_qpos[:, :2], axis=1) / (length * env.dt),
         "length": length,
     }
+    if "reward/body_contact" in traj:
+        # Crawling shows on the way to the goal: body contacts before the goal radius is first reached.
+        walking = alive * (np.minimum.accumulate(dist, axis=0) >= env.config.success_radius)
+        per_episode["body_contact_before_goal"] = (traj["reward/body_contact"] * walking).sum(0)
+        per_episode["steps_to_goal"] = walking.sum(0)
     summary = {
         "episodes": int(alive.shape[1]),
         "success_rate": float(per_episode["success"].mean()),
@@ -76,6 +81,8 @@ def episode_table(env, start_qpos, traj) -> dict:
         "nonfinite_rate": float(per_episode["nonfinite"].mean()),
         "mean_speed": float(per_episode["mean_speed"].mean()),
         "episode_length_mean": float(per_episode["length"].mean()),
+        **{f"{k}_mean": float(per_episode[k].mean()) for k in ("body_contact_before_goal", "steps_to_goal")
+           if k in per_episode},
         # Per-episode sums of each scaled reward term, averaged: e.g. body_contact near 0 means no crawling.
         "reward_terms": {k[len("reward/"):]: float((traj[k] * alive).sum(0).mean())
                          for k in traj if k.startswith("reward/")},
@@ -92,6 +99,9 @@ def format_table(summary: dict) -> str:
             ("return, mean +- std", f"{summary['return_mean']:.1f} +- {summary['return_std']:.1f}"),
             ("fall rate", f"{summary['fall_rate']:.1%}"), ("mean speed", f"{summary['mean_speed']:.3f} m/s"),
             ("episode length, mean", f"{summary['episode_length_mean']:.0f} steps")]
+    if "body_contact_before_goal_mean" in summary:
+        rows += [("steps before reaching the goal, mean", f"{summary['steps_to_goal_mean']:.0f}"),
+                 ("body contact before the goal, mean", f"{summary['body_contact_before_goal_mean']:.1f}")]
     rows += [(f"  reward/{k}, per episode", f"{v:.1f}") for k, v in summary["reward_terms"].items()]
     width = max(len(k) for k, _ in rows)
     return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
