@@ -105,12 +105,38 @@ def solver_error(env, steps: int) -> tuple[float, float]:
     return float(np.abs(fast[:3] - ref[:3]).max()), float(np.abs(fast[7:] - ref[7:]).max())
 
 
+def train_speed(num_envs: int = 256, updates: int = 8) -> dict:
+    """End-to-end PPO env steps/s (train.py's default settings, no evaluations) and compile time.
+    Two training epochs of `updates` updates each: the first includes compiling, the second not."""
+    from brax.training.agents.ppo import train as ppo
+
+    from hexa_mjx import training
+
+    cfg = training.TrainConfig(num_envs=num_envs)
+    env = training.make_env_for(cfg)
+    marks = [(0, time.perf_counter())]
+    ppo.train(environment=env, num_timesteps=2 * updates * cfg.steps_per_update, num_envs=cfg.num_envs,
+              episode_length=cfg.episode_length, learning_rate=cfg.lr, entropy_cost=cfg.ent_coef,
+              discounting=cfg.discount, unroll_length=cfg.unroll_length, batch_size=cfg.batch_size,
+              num_minibatches=cfg.num_minibatches, num_updates_per_batch=cfg.update_epochs,
+              normalize_observations=True, reward_scaling=cfg.reward_scaling, clipping_epsilon=cfg.clip,
+              gae_lambda=cfg.gae_lambda, max_grad_norm=cfg.max_grad_norm, vf_loss_coefficient=cfg.vf_coef,
+              network_factory=training.network_factory(cfg), num_evals=3, run_evals=False,
+              progress_fn=lambda step, m: marks.append((step, time.perf_counter())))
+    (s1, t1), (s2, t2) = marks[-2:]
+    epoch_s = t2 - t1
+    first_s = t1 - marks[0][1]
+    return {"train_steps_per_s": (s2 - s1) / epoch_s, "compile_s": first_s - epoch_s}
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(prog="python -m hexa_mjx.benchmark", description=__doc__.split("\n\n")[0])
     parser.add_argument("--batches", type=int, nargs="+", default=[64, 256, 1024], help="numbers of environments")
     parser.add_argument("--steps", type=int, default=100, help="control steps per timed rollout")
     parser.add_argument("--repeats", type=int, default=3, help="timed rollouts per batch size (median reported)")
     parser.add_argument("--ctrl_hz", type=float, default=60.0, help="control rate, Hz")
+    parser.add_argument("--train", action="store_true",
+                        help="also time end-to-end PPO training (train.py defaults) at the largest batch")
     parser.add_argument("--compare_solver", type=int, nargs=2, metavar=("ITERATIONS", "LS_ITERATIONS"),
                         help="also time this solver setting at the largest batch, beside the model's own")
     args = parser.parse_args(argv)
@@ -133,6 +159,12 @@ def main(argv=None) -> None:
         r = mjx_speed(other, args.batches[-1], args.steps, args.repeats)
         print(f"solver iterations={it} ls_iterations={ls}: {r['physics_steps_per_s']:.0f} physics steps/s "
               f"at {args.batches[-1]} envs ({r['physics_steps_per_s'] / c_rate:.0%} of MuJoCo C 1-thread)")
+    if args.train:
+        r = train_speed(args.batches[-1])
+        env_only = mjx_speed(env, args.batches[-1], args.steps, args.repeats)["env_steps_per_s"]
+        print(f"PPO training at {args.batches[-1]} envs: {r['train_steps_per_s']:.0f} env steps/s after "
+              f"{r['compile_s']:.0f} s of compiling; environment alone {env_only:.0f} env steps/s: the learner adds "
+              f"{env_only / r['train_steps_per_s'] - 1:.0%} to the physics time")
     for steps in (15, 60):
         pos, joint = solver_error(env, steps)
         print(f"solver accuracy after {steps * env.dt:.2f} s of a gait: torso {pos * 1000:.1f} mm, joints {joint:.3f} rad "
