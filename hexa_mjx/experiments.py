@@ -1,0 +1,235 @@
+"""The report's studies as grids of train.py runs, and their aggregation into figures and tables.
+
+    python -m hexa_mjx.experiments main       [--timesteps N] [--seeds K] [--out DIR]
+    python -m hexa_mjx.experiments ablation   [...]
+    python -m hexa_mjx.experiments lr         [...]
+    python -m hexa_mjx.experiments aggregate  --out DIR      # figures and tables from existing runs
+
+Runs go to <out>/<study>/<condition>-s<seed>/, each the folder train.py writes. A finished run
+(latest checkpoint at or past its budget) is skipped, an interrupted one resumed, so a study can
+be re-run until it is complete. Runs execute one after another in this process: on a 2-core CPU
+one run's 256 environments already keep both cores busy, so running seeds side by side would not
+finish sooner.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import dataclasses
+import json
+import math
+import sys
+from pathlib import Path
+
+from hexa_mjx import training
+
+STUDIES = ("main", "ablation", "lr")
+MAIN_REWARDS = ("goal_directed", "forward_motion")
+ABLATION_CONDITIONS = {"full": [], "no_contact": ["contact"], "no_height": ["height"],
+                       "no_stability": ["stability"], "no_velocity": ["velocity"]}
+LEARNING_RATES = (1e-4, 3e-4, 1e-3)
+DEFAULT_SEEDS = {"main": 5, "ablation": 1, "lr": 2}
+
+
+@dataclasses.dataclass(frozen=True)
+class Run:
+    study: str
+    condition: str
+    seed: int
+    config: training.TrainConfig
+
+
+def grid(study: str, out: Path, timesteps: int = 2_000_000, seeds: int | None = None,
+         num_envs: int = 256) -> list[Run]:
+    """The runs of one study (report sections 4.2 to 4.4)."""
+    if study not in STUDIES:
+        raise ValueError(f"unknown study {study!r}; choose one of {STUDIES}")
+    seeds = DEFAULT_SEEDS[study] if seeds is None else seeds
+    if seeds < 1:
+        raise ValueError(f"--seeds must be at least 1, got {seeds}")
+    if study == "main":
+        conditions = {reward: {"reward": reward} for reward in MAIN_REWARDS}
+    elif study == "ablation":
+        conditions = {name: {"ablate": ablate} for name, ablate in ABLATION_CONDITIONS.items()}
+    else:
+        conditions = {f"lr_{lr:g}": {"lr": lr} for lr in LEARNING_RATES}
+    runs = []
+    for condition, settings in conditions.items():
+        for seed in range(seeds):
+            run_dir = Path(out) / study / f"{condition}-s{seed}"
+            cfg = training.TrainConfig(num_envs=num_envs, num_timesteps=timesteps, seed=seed,
+                                       run_dir=str(run_dir), **settings)
+            runs.append(Run(study, condition, seed, cfg))
+    return runs
+
+
+def status(run: Run) -> str:
+    """'done', 'partial' (resumable) or 'new'."""
+    run_dir = Path(run.config.run_dir)
+    found = training.list_checkpoints(run_dir)
+    if found and found[-1][0] >= run.config.num_timesteps:
+        return "done"
+    return "partial" if (run_dir / "config.json").is_file() else "new"
+
+
+def run_study(runs: list[Run], train_fn=training.train) -> dict[str, int]:
+    """Train every run that is not finished; returns how many were skipped, resumed and started."""
+    counts = {"done": 0, "partial": 0, "new": 0}
+    for run in runs:
+        state = status(run)
+        counts[state] += 1
+        if state == "done":
+            print(f"skip {run.config.run_dir}: finished")
+            continue
+        train_fn(dataclasses.replace(run.config, resume=state == "partial"))
+    return counts
+
+
+# ---------------------------------------------------------------------------
+# Aggregation
+
+
+def load_runs(out: Path) -> list[dict]:
+    """Every run folder under <out>/<study>/ with its metrics rows."""
+    found = []
+    for metrics in sorted(Path(out).glob("*/*/metrics.jsonl")):
+        run_dir = metrics.parent
+        condition, _, seed = run_dir.name.rpartition("-s")
+        rows = [json.loads(line) for line in metrics.read_text().splitlines() if line.strip()]
+        if rows and seed.isdigit():
+            found.append({"study": run_dir.parent.name, "condition": condition, "seed": int(seed), "rows": rows})
+    return found
+
+
+def _mean_std(values):
+    values = [v for v in values if v is not None and math.isfinite(v)]
+    if not values:
+        return math.nan, math.nan
+    mean = sum(values) / len(values)
+    return mean, math.sqrt(sum((v - mean) ** 2 for v in values) / len(values))
+
+
+def final_table(runs: list[dict]) -> list[dict]:
+    """Per (study, condition): final success rate, distance and return, mean and std over seeds."""
+    groups: dict[tuple, list[dict]] = {}
+    for run in runs:
+        groups.setdefault((run["study"], run["condition"]), []).append(run["rows"][-1])
+    table = []
+    for (study, condition), last in sorted(groups.items()):
+        row = {"study": study, "condition": condition, "seeds": len(last), "steps": min(r["step"] for r in last)}
+        for key in ("success_rate", "final_distance", "episode_return"):
+            row[f"{key}_mean"], row[f"{key}_std"] = _mean_std([r.get(key) for r in last])
+        table.append(row)
+    return table
+
+
+def write_tables(table: list[dict], out: Path) -> tuple[Path, Path]:
+    csv_path, md_path = out / "results.csv", out / "results.md"
+    with open(csv_path, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(table[0]))
+        writer.writeheader()
+        writer.writerows(table)
+    lines = ["| study | condition | seeds | steps | success rate | final distance (m) | return |", "|---|---|---|---|---|---|---|"]
+    for r in table:
+        lines.append(f"| {r['study']} | {r['condition']} | {r['seeds']} | {r['steps']:,} | "
+                     f"{r['success_rate_mean']:.2f} +- {r['success_rate_std']:.2f} | "
+                     f"{r['final_distance_mean']:.3f} +- {r['final_distance_std']:.3f} | "
+                     f"{r['episode_return_mean']:.1f} +- {r['episode_return_std']:.1f} |")
+    md_path.write_text("\n".join(lines) + "\n")
+    return csv_path, md_path
+
+
+def _curves(ax, runs, key, label_of):
+    """Mean line and +-std band over seeds for each label."""
+    by_label: dict[str, list[dict]] = {}
+    for run in runs:
+        by_label.setdefault(label_of(run), []).append(run)
+    for label, group in sorted(by_label.items()):
+        steps = sorted({r["step"] for run in group for r in run["rows"]})
+        stats = [_mean_std([next((r.get(key) for r in run["rows"] if r["step"] == s), None) for run in group])
+                 for s in steps]
+        mean = [m for m, _ in stats]
+        ax.plot(steps, mean, label=label)
+        ax.fill_between(steps, [m - s for m, s in stats], [m + s for m, s in stats], alpha=0.2)
+    ax.set_xlabel("environment steps")
+    ax.grid(alpha=0.3)
+
+
+def plot_figures(runs: list[dict], out: Path) -> list[Path]:
+    """The report's Figures 1 to 4, for the studies present under `out`."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    written = []
+    by_study = {s: [r for r in runs if r["study"] == s] for s in STUDIES}
+
+    def save(fig, name):
+        fig.savefig(out / name, dpi=110)
+        plt.close(fig)
+        written.append(out / name)
+
+    if by_study["main"]:
+        fig, axes = plt.subplots(1, 3, figsize=(15, 4), constrained_layout=True)
+        for ax, (key, label) in zip(axes, [("final_distance", "(a) distance to goal (m)"),
+                                           ("episode_return", "(b) episodic return"),
+                                           ("goal_bonus", "(c) goal bonus")]):
+            _curves(ax, by_study["main"], key, lambda r: r["condition"])
+            ax.set_ylabel(label)
+        axes[0].legend()
+        save(fig, "fig1_main.png")
+        fig, ax = plt.subplots(figsize=(6, 4), constrained_layout=True)
+        for run in by_study["main"]:
+            if run["condition"] == "goal_directed":
+                ax.plot([r["step"] for r in run["rows"]], [r["final_distance"] for r in run["rows"]],
+                        label=f"seed {run['seed']}")
+        ax.set_xlabel("environment steps")
+        ax.set_ylabel("distance to goal (m), goal-directed")
+        ax.legend()
+        save(fig, "fig2_seeds.png")
+    for study, name, label_of in (("lr", "fig3_lr.png", lambda r: r["condition"]),
+                                  ("ablation", "fig4_ablation.png", lambda r: r["condition"])):
+        if by_study[study]:
+            fig, ax = plt.subplots(figsize=(6, 4), constrained_layout=True)
+            _curves(ax, by_study[study], "final_distance", label_of)
+            ax.set_ylabel("distance to goal (m)")
+            ax.legend()
+            save(fig, name)
+    return written
+
+
+def aggregate(out: Path) -> list[Path]:
+    """Figures, CSV and markdown table from the run folders under `out`."""
+    runs = load_runs(out)
+    if not runs:
+        raise FileNotFoundError(f"no run folders with metrics.jsonl under {out}/<study>/")
+    return plot_figures(runs, Path(out)) + list(write_tables(final_table(runs), Path(out)))
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m hexa_mjx.experiments", description=__doc__.split("\n\n")[0])
+    parser.add_argument("study", choices=[*STUDIES, "aggregate"], help="which study to run, or aggregate only")
+    parser.add_argument("--timesteps", type=int, default=2_000_000, help="env steps per run (default: 2M)")
+    parser.add_argument("--seeds", type=int, default=None, help="seeds per condition (default: main 5, ablation 1, lr 2)")
+    parser.add_argument("--num_envs", type=int, default=256, help="environments per run (default: 256)")
+    parser.add_argument("--out", type=Path, default=Path("experiments"), help="output folder (default: experiments)")
+    args = parser.parse_args(argv)
+    try:
+        if args.study != "aggregate":
+            runs = grid(args.study, args.out, args.timesteps, args.seeds, args.num_envs)
+            for run in runs:  # every run's settings are checked before the first one compiles
+                training.validate(dataclasses.replace(run.config, resume=status(run) != "new"))
+            print(run_study(runs))
+        paths = aggregate(args.out)
+    except (ValueError, FileNotFoundError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    for path in paths:
+        print(f"wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

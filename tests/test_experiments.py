@@ -1,0 +1,75 @@
+"""Study grids, skip/resume, and aggregation on synthetic metrics (no training)."""
+
+import csv
+import json
+
+import matplotlib.image as mpimg
+import pytest
+
+from hexa_mjx import experiments, training
+
+
+def test_grids_match_the_report(tmp_path):
+    main = experiments.grid("main", tmp_path)
+    assert len(main) == 10 and {r.config.reward for r in main} == {"goal_directed", "forward_motion"}
+    assert sorted({r.seed for r in main}) == [0, 1, 2, 3, 4]
+    ablation = experiments.grid("ablation", tmp_path)
+    assert [r.config.ablate for r in ablation] == [[], ["contact"], ["height"], ["stability"], ["velocity"]]
+    lr = experiments.grid("lr", tmp_path, timesteps=1000, seeds=3)
+    assert sorted({r.config.lr for r in lr}) == [1e-4, 3e-4, 1e-3] and len(lr) == 9
+    assert all(r.config.num_timesteps == 1000 for r in lr)
+    assert lr[0].config.run_dir == str(tmp_path / "lr" / "lr_0.0001-s0")
+    with pytest.raises(ValueError, match="unknown study"):
+        experiments.grid("speed", tmp_path)
+
+
+def test_finished_runs_are_skipped_and_interrupted_ones_resumed(tmp_path):
+    runs = experiments.grid("lr", tmp_path, timesteps=1000, seeds=1)
+    done, partial, new = runs
+    for run, step in ((done, 1024), (partial, 512)):
+        run_dir = tmp_path / run.config.run_dir
+        (run_dir / "checkpoints" / f"{step:012d}").mkdir(parents=True)
+        (run_dir / "config.json").write_text(json.dumps({}))
+    assert [experiments.status(r) for r in runs] == ["done", "partial", "new"]
+    calls = []
+    counts = experiments.run_study(runs, train_fn=calls.append)
+    assert counts == {"done": 1, "partial": 1, "new": 1}
+    assert [(c.run_dir, c.resume) for c in calls] == [(partial.config.run_dir, True), (new.config.run_dir, False)]
+
+
+def write_run(root, study, condition, seed, finals):
+    run_dir = root / study / f"{condition}-s{seed}"
+    run_dir.mkdir(parents=True)
+    rows = [{"step": 0, "final_distance": 1.5, "success_rate": 0.0, "episode_return": 0.0, "goal_bonus": 0.0},
+            {"step": 1000, **finals}]
+    (run_dir / "metrics.jsonl").write_text("\n".join(json.dumps(r) for r in rows) + "\n")
+
+
+def test_aggregation_writes_figures_and_the_right_table(tmp_path):
+    for seed, (dist, succ, ret) in enumerate([(0.2, 1.0, 100.0), (0.4, 0.5, 300.0)]):
+        write_run(tmp_path, "main", "goal_directed", seed,
+                  {"final_distance": dist, "success_rate": succ, "episode_return": ret, "goal_bonus": 10.0})
+        write_run(tmp_path, "main", "forward_motion", seed,
+                  {"final_distance": 3.0, "success_rate": 0.0, "episode_return": 50.0, "goal_bonus": 0.0})
+    write_run(tmp_path, "lr", "lr_0.001", 0, {"final_distance": 0.9, "success_rate": 0.25, "episode_return": 7.0,
+                                              "goal_bonus": 1.0})
+    paths = experiments.aggregate(tmp_path)
+    names = {p.name for p in paths}
+    assert {"fig1_main.png", "fig2_seeds.png", "fig3_lr.png", "results.csv", "results.md"} <= names
+    assert "fig4_ablation.png" not in names  # no ablation runs, no figure
+    assert mpimg.imread(tmp_path / "fig1_main.png").std() > 0.01
+    rows = {r["condition"]: r for r in csv.DictReader(open(tmp_path / "results.csv"))}
+    gd = rows["goal_directed"]
+    assert int(gd["seeds"]) == 2
+    assert float(gd["final_distance_mean"]) == pytest.approx(0.3)
+    assert float(gd["final_distance_std"]) == pytest.approx(0.1)
+    assert float(gd["success_rate_mean"]) == pytest.approx(0.75)
+    assert float(gd["episode_return_mean"]) == pytest.approx(200.0)
+    assert float(rows["forward_motion"]["final_distance_std"]) == 0.0
+    assert "| main | goal_directed | 2 | 1,000 | 0.75 +- 0.25 | 0.300 +- 0.100 | 200.0 +- 100.0 |" in (
+        tmp_path / "results.md").read_text()
+
+
+def test_aggregate_without_runs_is_a_clear_error(tmp_path):
+    with pytest.raises(FileNotFoundError, match="no run folders"):
+        experiments.aggregate(tmp_path)
