@@ -115,14 +115,8 @@ def train_speed(num_envs: int = 256, updates: int = 8) -> dict:
     cfg = training.TrainConfig(num_envs=num_envs)
     env = training.make_env_for(cfg)
     marks = [(0, time.perf_counter())]
-    ppo.train(environment=env, num_timesteps=2 * updates * cfg.steps_per_update, num_envs=cfg.num_envs,
-              episode_length=cfg.episode_length, learning_rate=cfg.lr, entropy_cost=cfg.ent_coef,
-              discounting=cfg.discount, unroll_length=cfg.unroll_length, batch_size=cfg.batch_size,
-              num_minibatches=cfg.num_minibatches, num_updates_per_batch=cfg.update_epochs,
-              normalize_observations=True, reward_scaling=cfg.reward_scaling, clipping_epsilon=cfg.clip,
-              gae_lambda=cfg.gae_lambda, max_grad_norm=cfg.max_grad_norm, vf_loss_coefficient=cfg.vf_coef,
-              network_factory=training.network_factory(cfg), num_evals=3, run_evals=False,
-              progress_fn=lambda step, m: marks.append((step, time.perf_counter())))
+    ppo.train(environment=env, num_timesteps=2 * updates * cfg.steps_per_update, **training.ppo_settings(cfg),
+              num_evals=3, run_evals=False, progress_fn=lambda step, m: marks.append((step, time.perf_counter())))
     (s1, t1), (s2, t2) = marks[-2:]
     epoch_s = t2 - t1
     first_s = t1 - marks[0][1]

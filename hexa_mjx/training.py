@@ -325,6 +325,17 @@ def _fmt_time(seconds: float) -> str:
 # Training
 
 
+def ppo_settings(cfg: TrainConfig) -> dict:
+    """brax ppo.train's keyword arguments for the algorithm and rollout shape of `cfg`."""
+    return dict(num_envs=cfg.num_envs, episode_length=cfg.episode_length, learning_rate=cfg.lr,
+                entropy_cost=cfg.ent_coef, discounting=cfg.discount, unroll_length=cfg.unroll_length,
+                batch_size=cfg.batch_size, num_minibatches=cfg.num_minibatches,
+                num_updates_per_batch=cfg.update_epochs, normalize_observations=True,
+                reward_scaling=cfg.reward_scaling, clipping_epsilon=cfg.clip, gae_lambda=cfg.gae_lambda,
+                max_grad_norm=cfg.max_grad_norm, vf_loss_coefficient=cfg.vf_coef,
+                network_factory=network_factory(cfg))
+
+
 def train(cfg: TrainConfig) -> dict:
     """Run (or resume) PPO for `cfg`; returns the last evaluation row."""
     from brax.training.agents.ppo import train as ppo
@@ -359,15 +370,9 @@ def train(cfg: TrainConfig) -> dict:
     t0 = time.time()
     print(f"training {cfg.reward} (ablate {cfg.ablate or 'none'}) seed {cfg.seed}: {remaining:,} steps on "
           f"{cfg.num_envs} envs, {cfg.steps_per_update:,} steps per update -> {run_dir}", flush=True)
-    ppo.train(
-        environment=env, num_timesteps=remaining, num_envs=cfg.num_envs, episode_length=cfg.episode_length,
-        learning_rate=cfg.lr, entropy_cost=cfg.ent_coef, discounting=cfg.discount, unroll_length=cfg.unroll_length,
-        batch_size=cfg.batch_size, num_minibatches=cfg.num_minibatches, num_updates_per_batch=cfg.update_epochs,
-        normalize_observations=True, reward_scaling=cfg.reward_scaling, clipping_epsilon=cfg.clip,
-        gae_lambda=cfg.gae_lambda, max_grad_norm=cfg.max_grad_norm, vf_loss_coefficient=cfg.vf_coef,
-        network_factory=network_factory(cfg), seed=cfg.seed + start_step, num_evals=cfg.num_evals,
-        num_eval_envs=cfg.num_eval_envs, deterministic_eval=True, progress_fn=on_progress,
-        policy_params_fn=on_params, restore_params=restore)
+    ppo.train(environment=env, num_timesteps=remaining, **ppo_settings(cfg), seed=cfg.seed + start_step,
+              num_evals=cfg.num_evals, num_eval_envs=cfg.num_eval_envs, deterministic_eval=True,
+              progress_fn=on_progress, policy_params_fn=on_params, restore_params=restore)
     logger.close()
     total = time.time() - t0
     last = logger.last
