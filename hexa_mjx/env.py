@@ -175,11 +175,11 @@ class HexapodEnv(Env):
         roll, pitch = roll_pitch(data.qpos[3:7])
         fell = (jp.abs(roll) > jp.pi / 2) | (jp.abs(pitch) > jp.pi / 2)
         done = fell | ~finite
-        terms = self._terms(prev, data, done)
+        dist = self._distance(data)
+        terms = self._terms(prev, data, done, roll, pitch, dist)
         scaled = {name: self.scales[name] * value for name, value in terms.items()}
         reward = sum(scaled.values())
 
-        dist = self._distance(data)
         success = jp.maximum(state.info["success"], (dist < self.config.success_radius).astype(jp.float32))
         t = state.info["t"] + 1
         over = done | (t >= self.config.episode_length)
@@ -220,14 +220,13 @@ class HexapodEnv(Env):
         bad = on_floor & (leg >= 0) & lifted
         return bad.sum(), (on_floor & ~self._geom_is_foot[other]).sum()
 
-    def _terms(self, prev, data, done):
+    def _terms(self, prev, data, done, roll, pitch, dist):
         """Unscaled values of the active reward terms for one transition."""
         xy, prev_xy, vel_xy = data.qpos[:2], prev.qpos[:2], data.qvel[:2]
         goal_dir = self._goal - xy
         goal_dir = goal_dir / jp.maximum(jp.linalg.norm(goal_dir), 1e-6)
-        roll, pitch = roll_pitch(data.qpos[3:7])
         bad, non_foot = self.contact_counts(data)
-        dist_prev, dist = self._distance(prev), self._distance(data)
+        dist_prev = self._distance(prev)
         # Inputs of every term; XLA drops whatever the active terms do not use.
         inputs = {
             "goal_approach": (dist_prev, dist),

@@ -146,8 +146,7 @@ def validate(cfg: TrainConfig) -> TrainConfig:
                               f" there; resume with the same settings or choose another --run_dir")
     elif cfg.resume and run_dir.exists() and any(run_dir.iterdir()):
         raise ConfigError(f"{run_dir} has no config.json, so it is not a run this tool can resume")
-    hexa_mjx.make_env(cfg.reward, ablate=tuple(cfg.ablate), ctrl_hz=cfg.ctrl_hz,
-                      episode_length=cfg.episode_length)  # bad ctrl_hz raises here, before compiling
+    make_env_for(cfg)  # a bad ctrl_hz raises here, before compiling
     return cfg
 
 
