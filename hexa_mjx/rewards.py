@@ -41,12 +41,12 @@ def energy(joint_vel):
 
 
 def contact_quality(bad_leg_contacts):
-    """Leg contacts with the floor while that leg's foot is lifted (leg-side dragging)."""
+    """Foot-link floor contacts while that leg's tip is lifted (leg-side dragging)."""
     return bad_leg_contacts.astype(jp.float32)
 
 
 def body_contact(non_foot_contacts):
-    """Floor contacts of any geom that is not a foot."""
+    """Floor contacts of links that are not feet (torso, hip and knee servos)."""
     return non_foot_contacts.astype(jp.float32)
 
 

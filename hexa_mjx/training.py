@@ -74,6 +74,9 @@ class TrainConfig:
     episode_length: int = dataclasses.field(default=1000, metadata={"help": "control steps per episode"})
     num_eval_envs: int = dataclasses.field(default=32, metadata={
         "help": "episodes per evaluation (deterministic policy)"})
+    cpu_devices: int = dataclasses.field(default=0, metadata={
+        "help": "on the CPU: XLA host devices that split environments and minibatches, one core each "
+                "(0: one per core, as many as divide num_envs and batch_size; 1: a single device)"})
 
     @property
     def steps_per_update(self) -> int:
@@ -88,7 +91,7 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 
 # Settings that may change on --resume without making it a different run.
-RESUMABLE = {"num_timesteps", "num_evals", "resume", "run_dir"}
+RESUMABLE = {"num_timesteps", "num_evals", "resume", "run_dir", "cpu_devices"}
 
 
 class ConfigError(ValueError):
@@ -118,6 +121,29 @@ def default_run_dir(cfg: TrainConfig) -> Path:
     return Path("runs") / f"{cfg.reward}{ablations}-s{cfg.seed}"
 
 
+def use_cpu_devices(n: int = 0) -> None:
+    """Ask XLA for `n` CPU devices (0: one per core) before JAX starts; a no-op once it has started.
+
+    XLA runs one vmapped MJX step on about one core, so on a CPU one device leaves the other cores
+    idle; brax's PPO splits environments and minibatches over devices with pmap instead.
+    """
+    from jax._src import xla_bridge
+
+    if not xla_bridge.backends_are_initialized():
+        jax.config.update("jax_num_cpu_devices", n or len(os.sched_getaffinity(0)))
+
+
+def devices_for(cfg: TrainConfig) -> int:
+    """Devices PPO runs on: every accelerator, or on the CPU cfg.cpu_devices (0: the most that divide
+    num_envs and batch_size, up to the CPU devices JAX has)."""
+    if jax.default_backend() != "cpu":
+        return jax.local_device_count()
+    available = jax.local_device_count()
+    if cfg.cpu_devices:
+        return cfg.cpu_devices
+    return max(d for d in range(1, available + 1) if cfg.num_envs % d == 0 and cfg.batch_size % d == 0)
+
+
 def validate(cfg: TrainConfig) -> TrainConfig:
     """Fail fast, before any compile, on settings that cannot work; returns cfg with run_dir set."""
     rewards.make_scales(cfg.reward, cfg.ablate)  # unknown names raise ValueError
@@ -128,6 +154,16 @@ def validate(cfg: TrainConfig) -> TrainConfig:
             f"--num_envs {cfg.num_envs} does not fit the batch shape: batch_size x num_minibatches = "
             f"{cfg.batch_size} x {cfg.num_minibatches} = {trajectories} trajectory segments per update must be "
             f"a multiple of num_envs. Use one of {fits}, or change --batch_size/--num_minibatches.")
+    if cfg.cpu_devices < 0:
+        raise ConfigError(f"--cpu_devices must be 0 (one per core) or more, got {cfg.cpu_devices}")
+    devices = devices_for(cfg)
+    if jax.default_backend() == "cpu" and devices > jax.local_device_count():
+        raise ConfigError(f"--cpu_devices {devices} but JAX has {jax.local_device_count()} CPU devices: it had "
+                          "started before train() could ask for more; use train.py, or call "
+                          "hexa_mjx.training.use_cpu_devices() before anything else touches JAX")
+    if cfg.num_envs % devices or cfg.batch_size % devices:
+        raise ConfigError(f"{devices} devices must divide --num_envs ({cfg.num_envs}) and --batch_size "
+                          f"({cfg.batch_size}); change them or --cpu_devices")
     for name in ("num_timesteps", "num_evals", "unroll_length", "update_epochs", "episode_length", "num_eval_envs"):
         if getattr(cfg, name) < 1:
             raise ConfigError(f"--{name} must be at least 1, got {getattr(cfg, name)}")
@@ -339,6 +375,10 @@ def train(cfg: TrainConfig) -> dict:
     """Run (or resume) PPO for `cfg`; returns the last evaluation row."""
     from brax.training.agents.ppo import train as ppo
 
+    use_cpu_devices(cfg.cpu_devices)
+    # jax 0.9 implements pmap with shard_map by default, under which brax's training epoch compiles
+    # a second time on its second call (17 s here); the classic pmap compiles it once.
+    jax.config.update("jax_pmap_shmap_merge", False)
     cfg = validate(cfg)
     run_dir = Path(cfg.run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -367,9 +407,12 @@ def train(cfg: TrainConfig) -> dict:
             save_checkpoint(run_dir, start_step + step, params)
 
     t0 = time.time()
+    devices = devices_for(cfg)
     print(f"training {cfg.reward} (ablate {cfg.ablate or 'none'}) seed {cfg.seed}: {remaining:,} steps on "
-          f"{cfg.num_envs} envs, {cfg.steps_per_update:,} steps per update -> {run_dir}", flush=True)
+          f"{cfg.num_envs} envs ({devices} {jax.default_backend()} device{'s' * (devices > 1)}), "
+          f"{cfg.steps_per_update:,} steps per update -> {run_dir}", flush=True)
     ppo.train(environment=env, num_timesteps=remaining, **ppo_settings(cfg), seed=cfg.seed + start_step,
+              max_devices_per_host=devices,
               num_evals=cfg.num_evals, num_eval_envs=cfg.num_eval_envs, deterministic_eval=True,
               progress_fn=on_progress, policy_params_fn=on_params, restore_params=restore)
     logger.close()
