@@ -1,11 +1,14 @@
 """Environment speed: MJX batched env/physics steps per second beside MuJoCo C.
 
     python -m hexa_mjx.benchmark [--batches 64 256 1024] [--steps 100] [--repeats 3] [--compare_solver 4 8]
+                                 [--profile] [--train]
 
 Prints compile time, then for each batch size the median over repeats of env
 steps/s and physics steps/s (env steps x substeps) under random actions, then
 MuJoCo C's single-thread physics steps/s on the same model (mujoco.rollout) and
-the MJX/C ratio. Everything is measured in one run, side by side.
+the MJX/C ratio. Everything is measured in one run, side by side. --profile splits
+one PPO update into its parts; --train times end-to-end PPO beside the environment
+alone, on one device and on one CPU device per core.
 """
 
 from __future__ import annotations
@@ -53,6 +56,15 @@ def mjx_speed(env, batch: int, steps: int, repeats: int) -> dict:
     env_rate = statistics.median(rates)
     return {"batch": batch, "compile_s": compile_s, "env_steps_per_s": env_rate,
             "physics_steps_per_s": env_rate * env.n_substeps}
+
+
+def pmap_speed(env, batch: int, steps: int, repeats: int, devices: int) -> float:
+    """Median env steps/s with the batch split over `devices` devices (pmap), as PPO splits it."""
+    reset = jax.pmap(jax.vmap(env.reset))
+    run = jax.pmap(_rollout_fn(env, steps))
+    state = reset(jax.random.split(jax.random.PRNGKey(0), batch).reshape(devices, batch // devices, -1))
+    keys = jax.random.split(jax.random.PRNGKey(1), devices)
+    return batch * steps / _timed(run, (state, keys), repeats)[1]
 
 
 def mujoco_c_speed(model: mujoco.MjModel, steps: int, repeats: int, seed: int = 0) -> float:
@@ -105,22 +117,134 @@ def solver_error(env, steps: int) -> tuple[float, float]:
     return float(np.abs(fast[:3] - ref[:3]).max()), float(np.abs(fast[7:] - ref[7:]).max())
 
 
-def train_speed(num_envs: int = 256, updates: int = 8) -> dict:
-    """End-to-end PPO env steps/s (train.py's default settings, no evaluations) and compile time.
-    Two training epochs of `updates` updates each: the first includes compiling, the second not."""
+def train_speed(num_envs: int = 256, updates: int = 4, devices: int = 1) -> dict:
+    """End-to-end PPO env steps/s (train.py's settings, no evaluations) and compile time on `devices`.
+    Three training epochs of `updates` updates: the first compiles, the last is timed."""
     from brax.training.agents.ppo import train as ppo
 
     from hexa_mjx import training
 
+    jax.config.update("jax_pmap_shmap_merge", False)  # as train() does: one compile of the epoch
     cfg = training.TrainConfig(num_envs=num_envs)
     env = training.make_env_for(cfg)
     marks = [(0, time.perf_counter())]
-    ppo.train(environment=env, num_timesteps=2 * updates * cfg.steps_per_update, **training.ppo_settings(cfg),
-              num_evals=3, run_evals=False, progress_fn=lambda step, m: marks.append((step, time.perf_counter())))
+    ppo.train(environment=env, num_timesteps=3 * updates * cfg.steps_per_update, **training.ppo_settings(cfg),
+              num_evals=4, run_evals=False, max_devices_per_host=devices,
+              progress_fn=lambda step, m: marks.append((step, time.perf_counter())))
     (s1, t1), (s2, t2) = marks[-2:]
     epoch_s = t2 - t1
-    first_s = t1 - marks[0][1]
-    return {"train_steps_per_s": (s2 - s1) / epoch_s, "compile_s": first_s - epoch_s}
+    return {"train_steps_per_s": (s2 - s1) / epoch_s, "compile_s": (marks[-3][1] - marks[0][1]) - epoch_s,
+            "update_s": epoch_s / updates}
+
+
+def _timed(fn, args, repeats):
+    """(compile s, median run s, output) of a jitted function."""
+    t0 = time.perf_counter()
+    out = jax.block_until_ready(fn(*args))
+    compile_s, times = time.perf_counter() - t0, []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        out = jax.block_until_ready(fn(*args))
+        times.append(time.perf_counter() - t0)
+    return compile_s, statistics.median(times), out
+
+
+def _without_contacts(env):
+    """A copy of `env` whose physics skips collision detection and contact forces."""
+    import copy
+
+    from mujoco import mjx
+
+    model = copy.copy(env.mj_model)
+    model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
+    bare = copy.copy(env)
+    bare.mjx_model = mjx.put_model(model, impl="jax")
+    bare._data0 = mjx.make_data(bare.mjx_model, impl="jax")
+    return bare
+
+
+def training_profile(num_envs: int = 256, repeats: int = 3, **overrides) -> dict:
+    """Seconds per PPO update on one device, by part: physics without contacts, contacts, policy
+    inference while acting, and the SGD epochs, each timed alone with train.py's settings
+    (`overrides` set other TrainConfig fields)."""
+    import functools
+
+    import optax
+    from brax import envs
+    from brax.training import acting
+    from brax.training.agents.ppo import losses as ppo_losses
+    from brax.training.agents.ppo import networks as ppo_networks
+
+    from hexa_mjx import training
+
+    cfg = training.TrainConfig(num_envs=num_envs, **overrides)
+    env = training.make_env_for(cfg)
+    steps = cfg.steps_per_update // num_envs  # control steps per env per update
+    keys = jax.random.split(jax.random.PRNGKey(0), num_envs)
+
+    def random_rollout(wrapped):
+        def run(state, key):
+            def body(carry, _):
+                state, key = carry
+                key, sub = jax.random.split(key)
+                action = jax.random.uniform(sub, (num_envs, env.action_size), minval=-1, maxval=1)
+                return (wrapped.step(state, action), key), None
+            return jax.lax.scan(body, (state, key), None, length=steps)[0][0]
+        return jax.jit(run), jax.jit(wrapped.reset)(keys)
+
+    out = {}
+    for name, e in (("env", env), ("env_without_contacts", _without_contacts(env))):
+        run, state = random_rollout(envs.training.wrap(e, episode_length=cfg.episode_length))
+        out[name] = _timed(run, (state, jax.random.PRNGKey(1)), repeats)[1]
+
+    # Acting as brax's PPO does it: the policy samples actions, trajectories are regrouped for SGD.
+    wrapped = envs.training.wrap(env, episode_length=cfg.episode_length)
+    nets = training.make_networks(cfg, env)
+    normalizer, policy_params, value_params = training.init_params(cfg, env)
+    params = ppo_losses.PPONetworkParams(policy=policy_params, value=value_params)
+    make_policy = ppo_networks.make_inference_fn(nets)
+
+    def act(state, key, params):
+        policy = make_policy((normalizer, params.policy, params.value))
+
+        def segment(carry, _):
+            state, key = carry
+            key, sub = jax.random.split(key)
+            state, data = acting.generate_unroll(wrapped, state, policy, sub, cfg.unroll_length,
+                                                 extra_fields=("truncation",))
+            return (state, key), data
+        _, data = jax.lax.scan(segment, (state, key), (), length=steps // cfg.unroll_length)
+        data = jax.tree.map(lambda x: jp.swapaxes(x, 1, 2), data)
+        return jax.tree.map(lambda x: jp.reshape(x, (-1,) + x.shape[2:]), data)
+    _, out["acting"], data = _timed(jax.jit(act), (jax.jit(wrapped.reset)(keys), jax.random.PRNGKey(1), params),
+                                    repeats)
+
+    # The SGD epochs of one update, as brax's PPO runs them (same loss, clipping and Adam).
+    loss_fn = functools.partial(ppo_losses.compute_ppo_loss, ppo_network=nets, entropy_cost=cfg.ent_coef,
+                                discounting=cfg.discount, reward_scaling=cfg.reward_scaling,
+                                gae_lambda=cfg.gae_lambda, clipping_epsilon=cfg.clip, normalize_advantage=True,
+                                vf_coefficient=cfg.vf_coef)
+    grad_fn = jax.value_and_grad(loss_fn, has_aux=True)
+    optimizer = optax.chain(optax.clip_by_global_norm(cfg.max_grad_norm), optax.adam(cfg.lr))
+
+    def sgd(params, opt_state, key):
+        def minibatch(carry, batch):
+            opt_state, params, key = carry
+            key, sub = jax.random.split(key)
+            _, grads = grad_fn(params, normalizer, batch, sub)
+            updates, opt_state = optimizer.update(grads, opt_state)
+            return (opt_state, optax.apply_updates(params, updates), key), None
+
+        def epoch(carry, _):
+            opt_state, params, key = carry
+            key, perm, sub = jax.random.split(key, 3)
+            batches = jax.tree.map(lambda x: jp.reshape(jax.random.permutation(perm, x),
+                                                        (cfg.num_minibatches, -1) + x.shape[1:]), data)
+            (opt_state, params, _), _ = jax.lax.scan(minibatch, (opt_state, params, sub), batches)
+            return (opt_state, params, key), None
+        return jax.lax.scan(epoch, (opt_state, params, key), (), length=cfg.update_epochs)[0][1]
+    out["sgd"] = _timed(jax.jit(sgd), (params, optimizer.init(params), jax.random.PRNGKey(2)), repeats)[1]
+    return out
 
 
 def main(argv=None) -> None:
@@ -130,11 +254,18 @@ def main(argv=None) -> None:
     parser.add_argument("--repeats", type=int, default=3, help="timed rollouts per batch size (median reported)")
     parser.add_argument("--ctrl_hz", type=float, default=60.0, help="control rate, Hz")
     parser.add_argument("--train", action="store_true",
-                        help="also time end-to-end PPO training (train.py defaults) at the largest batch")
+                        help="also time end-to-end PPO training (train.py defaults) at the largest batch, "
+                             "on one device and on one CPU device per core")
+    parser.add_argument("--profile", action="store_true",
+                        help="also split one PPO update (largest batch, one device) into physics, contacts, "
+                             "policy inference and SGD")
     parser.add_argument("--compare_solver", type=int, nargs=2, metavar=("ITERATIONS", "LS_ITERATIONS"),
                         help="also time this solver setting at the largest batch, beside the model's own")
     args = parser.parse_args(argv)
 
+    from hexa_mjx import training
+
+    training.use_cpu_devices()  # one CPU device per core, as train.py has; single-device timings use one
     env = hexa_mjx.make_env(ctrl_hz=args.ctrl_hz)
     m = env.mj_model
     print(f"model: {env.config.model_path}  nv={m.nv} nu={m.nu} ngeom={m.ngeom} "
@@ -153,12 +284,25 @@ def main(argv=None) -> None:
         r = mjx_speed(other, args.batches[-1], args.steps, args.repeats)
         print(f"solver iterations={it} ls_iterations={ls}: {r['physics_steps_per_s']:.0f} physics steps/s "
               f"at {args.batches[-1]} envs ({r['physics_steps_per_s'] / c_rate:.0%} of MuJoCo C 1-thread)")
+    if args.profile:
+        p = training_profile(args.batches[-1], args.repeats)
+        parts = {"physics without contacts": p["env_without_contacts"], "contacts": p["env"] - p["env_without_contacts"],
+                 "policy inference": p["acting"] - p["env"], "SGD (epochs x minibatches)": p["sgd"]}
+        total = p["acting"] + p["sgd"]
+        print(f"one PPO update at {args.batches[-1]} envs on one device, parts timed alone (median of {args.repeats}):")
+        for name, sec in parts.items():
+            print(f"  {name:<28} {sec * 1000:7.0f} ms  {sec / total:5.0%}")
+        print(f"  learner (policy + SGD) adds {(total - p['env']) / p['env']:.0%} to the environment time")
     if args.train:
-        r = train_speed(args.batches[-1])
-        env_only = mjx_speed(env, args.batches[-1], args.steps, args.repeats)["env_steps_per_s"]
-        print(f"PPO training at {args.batches[-1]} envs: {r['train_steps_per_s']:.0f} env steps/s after "
-              f"{r['compile_s']:.0f} s of compiling; environment alone {env_only:.0f} env steps/s: the learner adds "
-              f"{env_only / r['train_steps_per_s'] - 1:.0%} to the physics time")
+        cores = jax.local_device_count()
+        env_rates = {1: mjx_speed(env, args.batches[-1], args.steps, args.repeats)["env_steps_per_s"]}
+        if cores > 1:
+            env_rates[cores] = pmap_speed(env, args.batches[-1], args.steps, args.repeats, cores)
+        for devices, env_rate in env_rates.items():
+            r = train_speed(args.batches[-1], devices=devices)
+            print(f"PPO training at {args.batches[-1]} envs on {devices} device(s): {r['train_steps_per_s']:.0f} "
+                  f"env steps/s after {r['compile_s']:.0f} s of compiling; environment alone {env_rate:.0f} env "
+                  f"steps/s: the learner adds {env_rate / r['train_steps_per_s'] - 1:.0%} to the environment time")
     for steps in (15, 60):
         pos, joint = solver_error(env, steps)
         print(f"solver accuracy after {steps * env.dt:.2f} s of a gait: torso {pos * 1000:.1f} mm, joints {joint:.3f} rad "

@@ -42,6 +42,10 @@ class EnvConfig:
     episode_length: int = 1000  # control steps
     goal_distance: float = 1.5  # m, goal placed this far ahead (+x) of the start
     success_radius: float = 0.5  # m
+    # The goal bonus is paid only while nothing but the feet touches the floor. The report pays it
+    # for being within the radius; with that, policies reached the goal, then rested on their shins
+    # there for the rest of the episode (100 per step dwarfs -1 per contact). False: the report's bonus.
+    bonus_on_feet_only: bool = True
     target_height: float = 0.12  # m, torso-origin height the height term aims for
     lift_clearance: float = 0.02  # m, foot height above which a leg's floor contact is "bad"
     settle_steps: int = 100  # physics steps the start pose settles before the first observation
@@ -112,8 +116,6 @@ class HexapodEnv(Env):
                 body_leg[b] = body_leg[model.body_parentid[b]]
         self._geom_leg = jp.asarray(body_leg[model.geom_bodyid])
         self._geom_is_foot = jp.asarray(np.isin(np.arange(model.ngeom), self._feet))
-        # The report's "foot" is a link: the leg's last body (shin capsule and tip sphere here).
-        self._geom_on_foot_link = jp.asarray(np.isin(model.geom_bodyid, model.geom_bodyid[self._feet]))
         self._ctrl_lo, self._ctrl_hi = (jp.asarray(x, dtype=jp.float32) for x in model.actuator_ctrlrange.T)
 
         # Settle the start pose once with MuJoCo C; every reset starts from that state.
@@ -154,7 +156,7 @@ class HexapodEnv(Env):
         zero = jp.zeros(())
         metrics = {f"reward/{name}": zero for name in self._active_terms()}
         metrics.update(distance=self._distance(data), success=zero, fell=zero, nonfinite=zero, goal_bonus=zero,
-                       shin_contacts=zero, final_distance=zero, final_success=zero)
+                       final_distance=zero, final_success=zero)
         info = {"rng": rng, "t": jp.zeros((), jp.int32), "success": zero}
         return State(data, self._obs(data), zero, zero, metrics, info)
 
@@ -178,8 +180,7 @@ class HexapodEnv(Env):
         fell = (jp.abs(roll) > jp.pi / 2) | (jp.abs(pitch) > jp.pi / 2)
         done = fell | ~finite
         dist = self._distance(data)
-        contacts = self.contact_counts(data)
-        terms = self._terms(prev, data, done, roll, pitch, dist, contacts)
+        terms = self._terms(prev, data, done, roll, pitch, dist)
         scaled = {name: self.scales[name] * value for name, value in terms.items()}
         reward = sum(scaled.values())
 
@@ -191,7 +192,7 @@ class HexapodEnv(Env):
         metrics = {**state.metrics, **{f"reward/{name}": value for name, value in scaled.items()}}
         # Per-step values whose sums over an episode are the per-episode figures brax's evaluator reports.
         metrics.update(distance=dist, success=success, fell=fell.astype(jp.float32),
-                       nonfinite=(~finite).astype(jp.float32), shin_contacts=contacts[2].astype(jp.float32),
+                       nonfinite=(~finite).astype(jp.float32),
                        goal_bonus=REPORT_GOAL_BONUS * rewards.goal_bonus(dist, self.config.success_radius),
                        final_distance=jp.where(over, dist, 0.0), final_success=jp.where(over, success, 0.0))
         return state.replace(pipeline_state=data, obs=self._obs(data), reward=reward,
@@ -212,31 +213,29 @@ class HexapodEnv(Env):
                                data.qpos[7:], data.qvel[6:], goal_vec, jp.linalg.norm(goal_vec)[None]])
 
     def contact_counts(self, data: mjx.Data):
-        """Floor contacts of a physics state, from MJX's contact arrays, as the report counts them per link:
-        (foot-link contacts while that leg's tip is lifted more than `lift_clearance`, i.e. the leg's side
-        dragging; contacts of non-foot links: torso, hip and knee servos; shin contacts, tip or not)."""
+        """Floor contacts of a physics state: (leg contacts while that leg's foot is lifted
+        more than `lift_clearance`, contacts of any non-foot geom), from MJX's contact arrays."""
         geom1, geom2, dist = floor_contacts(data)
         on_floor = (dist < 0) & ((geom1 == self._floor) | (geom2 == self._floor))
         other = jp.where(geom1 == self._floor, geom2, geom1)
-        leg, foot_link = self._geom_leg[other], self._geom_on_foot_link[other]
-        tip_clearance = data.geom_xpos[self._feet, 2] - self.mj_model.geom_size[self._feet, 0]
-        lifted = tip_clearance[jp.maximum(leg, 0)] > self.config.lift_clearance
-        side = on_floor & foot_link & lifted
-        shin = on_floor & foot_link & ~self._geom_is_foot[other]
-        return side.sum(), (on_floor & ~foot_link).sum(), shin.sum()
+        leg = self._geom_leg[other]
+        foot_clearance = data.geom_xpos[self._feet, 2] - self.mj_model.geom_size[self._feet, 0]
+        lifted = foot_clearance[jp.maximum(leg, 0)] > self.config.lift_clearance
+        bad = on_floor & (leg >= 0) & lifted
+        return bad.sum(), (on_floor & ~self._geom_is_foot[other]).sum()
 
-    def _terms(self, prev, data, done, roll, pitch, dist, contacts):
+    def _terms(self, prev, data, done, roll, pitch, dist):
         """Unscaled values of the active reward terms for one transition."""
         xy, prev_xy, vel_xy = data.qpos[:2], prev.qpos[:2], data.qvel[:2]
         goal_dir = self._goal - xy
         goal_dir = goal_dir / jp.maximum(jp.linalg.norm(goal_dir), 1e-6)
-        bad, non_foot, _ = contacts
+        bad, non_foot = self.contact_counts(data)
         dist_prev = self._distance(prev)
         # Inputs of every term; XLA drops whatever the active terms do not use.
         inputs = {
             "goal_approach": (dist_prev, dist),
             "velocity_alignment": (vel_xy, goal_dir),
-            "goal_bonus": (dist, self.config.success_radius),
+            "goal_bonus": (dist, self.config.success_radius, non_foot if self.config.bonus_on_feet_only else 0),
             "stability": (roll, pitch),
             "height": (data.qpos[2], self.config.target_height),
             "energy": (data.qvel[6:],),

@@ -33,7 +33,7 @@ def rollout(env, policy, num_episodes: int, seed: int = 0):
             nxt = jax.vmap(env.step)(state, action)
             out = {"qpos": nxt.pipeline_state.qpos, "reward": nxt.reward, "done": nxt.done, "alive": alive,
                    **{k: v for k, v in nxt.metrics.items()
-                      if k.startswith("reward/") or k in ("distance", "fell", "goal_bonus", "nonfinite", "shin_contacts")}}
+                      if k.startswith("reward/") or k in ("distance", "fell", "goal_bonus", "nonfinite")}}
             return (nxt, alive * (1.0 - nxt.done)), out
 
         start_qpos = state.pipeline_state.qpos
@@ -68,9 +68,6 @@ def episode_table(env, start_qpos, traj) -> dict:
         walking = alive * (np.minimum.accumulate(dist, axis=0) >= env.config.success_radius)
         per_episode["body_contact_before_goal"] = (traj["reward/body_contact"] * walking).sum(0)
         per_episode["steps_to_goal"] = walking.sum(0)
-    if "shin_contacts" in traj:
-        # Shins on the floor (counted by the report under foot contacts, not body contacts): shown apart.
-        per_episode["shin_contacts"] = (traj["shin_contacts"] * alive).sum(0)
     summary = {
         "episodes": int(alive.shape[1]),
         "success_rate": float(per_episode["success"].mean()),
@@ -84,7 +81,7 @@ def episode_table(env, start_qpos, traj) -> dict:
         "nonfinite_rate": float(per_episode["nonfinite"].mean()),
         "mean_speed": float(per_episode["mean_speed"].mean()),
         "episode_length_mean": float(per_episode["length"].mean()),
-        **{f"{k}_mean": float(per_episode[k].mean()) for k in ("body_contact_before_goal", "steps_to_goal", "shin_contacts")
+        **{f"{k}_mean": float(per_episode[k].mean()) for k in ("body_contact_before_goal", "steps_to_goal")
            if k in per_episode},
         # Per-episode sums of each scaled reward term, averaged: e.g. body_contact near 0 means no crawling.
         "reward_terms": {k[len("reward/"):]: float((traj[k] * alive).sum(0).mean())
@@ -105,8 +102,6 @@ def format_table(summary: dict) -> str:
     if "body_contact_before_goal_mean" in summary:
         rows += [("steps before reaching the goal, mean", f"{summary['steps_to_goal_mean']:.0f}"),
                  ("body contact before the goal, mean", f"{summary['body_contact_before_goal_mean']:.1f}")]
-    if "shin_contacts_mean" in summary:
-        rows += [("shin-floor contact steps, mean", f"{summary['shin_contacts_mean']:.1f}")]
     rows += [(f"  reward/{k}, per episode", f"{v:.1f}") for k, v in summary["reward_terms"].items()]
     width = max(len(k) for k, _ in rows)
     return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)

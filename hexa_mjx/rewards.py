@@ -20,9 +20,9 @@ def velocity_alignment(vel_xy, goal_dir_xy):
     return jp.dot(vel_xy, goal_dir_xy)
 
 
-def goal_bonus(dist, success_radius):
-    """1 while the torso is within the success radius of the goal."""
-    return (dist < success_radius).astype(jp.float32)
+def goal_bonus(dist, success_radius, non_foot_contacts=0):
+    """1 while the torso is within the success radius of the goal with only its feet on the floor."""
+    return ((dist < success_radius) & (non_foot_contacts == 0)).astype(jp.float32)
 
 
 def stability(roll, pitch):
@@ -41,12 +41,12 @@ def energy(joint_vel):
 
 
 def contact_quality(bad_leg_contacts):
-    """Foot-link floor contacts while that leg's tip is lifted (leg-side dragging)."""
+    """Leg contacts with the floor while that leg's foot is lifted (leg-side dragging)."""
     return bad_leg_contacts.astype(jp.float32)
 
 
 def body_contact(non_foot_contacts):
-    """Floor contacts of links that are not feet (torso, hip and knee servos)."""
+    """Floor contacts of any geom that is not a foot."""
     return non_foot_contacts.astype(jp.float32)
 
 

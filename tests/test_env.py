@@ -29,7 +29,8 @@ def test_sizes_and_dtypes(env, state0):
 
 def test_start_pose_rests_on_feet(env, state0):
     data = state0.pipeline_state
-    assert tuple(int(x) for x in env.contact_counts(data)) == (0, 0, 0)
+    bad, non_foot = env.contact_counts(data)
+    assert int(bad) == 0 and int(non_foot) == 0
     geom1, geom2, dist = hexa_mjx.env.floor_contacts(data)
     feet = {env.mj_model.geom(robot.foot_geom(leg)).id for leg in robot.LEGS}
     touching = {int(g) for g, d in zip(np.asarray(geom2), np.asarray(dist)) if d < 0}
@@ -74,46 +75,59 @@ def counts_at(env, state0):
 
 
 def _c_contacts(env, qpos):
-    """Floor contacts MuJoCo C finds for a pose: list of (geom name, on a foot link, tip clearance of its leg)."""
+    """Floor contacts MuJoCo C finds for a pose: list of (geom name, foot clearance of its leg or None)."""
     m, d = env.mj_model, mujoco.MjData(env.mj_model)
     d.qpos[:] = qpos
     mujoco.mj_forward(m, d)
-    foot_bodies = {m.geom_bodyid[m.geom(robot.foot_geom(leg)).id]: leg for leg in robot.LEGS}
     out = []
     for c in d.contact[: d.ncon]:
         geom = int(c.geom[1])
-        leg = foot_bodies.get(m.geom_bodyid[geom])
+        leg, body = None, m.geom_bodyid[geom]
+        while leg is None and body > 0:  # the leg whose joint moves this body
+            joints = [m.joint(j).name for j in range(m.njnt) if m.jnt_bodyid[j] == body]
+            leg = next((j.split("_")[0] for j in joints if j.startswith("leg")), None)
+            body = m.body_parentid[body]
         clear = None
         if leg is not None:
             foot = m.geom(robot.foot_geom(leg)).id
             clear = d.geom_xpos[foot, 2] - m.geom_size[foot, 0]
-        out.append((m.geom(geom).name, leg is not None, clear))
+        out.append((m.geom(geom).name, clear))
     return out
 
 
 def test_body_contact_when_torso_lies_on_floor(env, counts_at):
     qpos = np.array(env.mj_model.key_qpos[0])
     qpos[2], qpos[3:7] = 0.0, FLIPPED  # on its back, legs in the air
-    c = _c_contacts(env, qpos)
-    assert robot.TORSO_GEOM in [name for name, _, _ in c] and not any(foot_link for _, foot_link, _ in c)
-    side, body, shin = counts_at(qpos)
-    assert (side, body, shin) == (0, len(c), 0) and body > 0
-    assert counts_at(env.mj_model.key_qpos[0]) == (0, 0, 0)  # standing
+    c_names = [name for name, _ in _c_contacts(env, qpos)]
+    assert robot.TORSO_GEOM in c_names and not any(n.endswith("_foot") for n in c_names)
+    bad, non_foot = counts_at(qpos)
+    assert non_foot == len(c_names) > 0
+    standing = counts_at(env.mj_model.key_qpos[0])
+    assert standing == (0, 0)
 
 
-def test_contact_counts_when_kneeling(env, counts_at):
-    # Knees folded so femurs and shins rest on the floor and every tip is in the air.
+def test_contact_quality_when_leg_links_touch_with_feet_lifted(env, counts_at):
+    # Kneeling: knees folded so every femur/shin rests on the floor and every foot is in the air.
     qpos = np.array(env.mj_model.key_qpos[0])
     qpos[2] = 0.1
     qpos[8::3], qpos[9::3] = -1.5, -1.0
     c = _c_contacts(env, qpos)
-    shins = [name for name, foot_link, _ in c if foot_link]
-    assert shins and all(clear > 0.02 for _, foot_link, clear in c if foot_link)  # tips up
-    assert not any(name.endswith("_foot") for name in shins)
-    side, body, shin = counts_at(qpos)
-    # Shins on the floor with the tips up drag the legs' sides; the knee servos are body (non-foot) links.
-    assert side == shin == len(shins)
-    assert body == len(c) - len(shins) > 0
+    assert c and all(clear is not None and clear > 0.02 for _, clear in c)  # leg links only, feet up
+    bad, non_foot = counts_at(qpos)
+    assert bad == non_foot == len(c)
+
+
+def test_goal_bonus_is_paid_only_on_feet(env, state0):
+    # At the goal (distance 0): standing earns the bonus, lying on the back does not.
+    def bonus(qpos):
+        data = mjx.forward(env.mjx_model, state0.pipeline_state.replace(qpos=qpos))
+        zero = jp.zeros(())
+        return env._terms(data, data, zero > 0, zero, zero, zero)["goal_bonus"]
+    bonus = jax.jit(bonus)
+    lying = np.array(env.mj_model.key_qpos[0])
+    lying[2], lying[3:7] = 0.0, FLIPPED
+    assert float(bonus(jp.asarray(env.mj_model.key_qpos[0], jp.float32))) == 1.0
+    assert float(bonus(jp.asarray(lying, jp.float32))) == 0.0
 
 
 def test_mjx_matches_mujoco_c(env, step, state0):

@@ -30,6 +30,11 @@ def test_goal_bonus_only_inside_radius():
     assert scaled("goal_bonus", jp.float32(0.51), 0.5) == 0.0
 
 
+def test_goal_bonus_needs_only_feet_on_the_floor():
+    assert scaled("goal_bonus", jp.float32(0.2), 0.5, jp.int32(0)) == 100.0
+    assert scaled("goal_bonus", jp.float32(0.2), 0.5, jp.int32(2)) == 0.0
+
+
 def test_shaping_penalties():
     assert scaled("stability", jp.float32(0.1), jp.float32(-0.2)) == pytest.approx(-0.15)
     assert scaled("height", jp.float32(0.22), 0.12) == pytest.approx(-0.2)
