@@ -52,6 +52,9 @@ def test_train_writes_run_directory(trained):
     assert [step for step, _ in training.list_checkpoints(run_dir)] == [64]
     assert list((run_dir / "tb").glob("events.out.tfevents.*"))
     assert "success" in proc.stdout and "steps/s" in proc.stdout and "done:" in proc.stdout
+    # One CPU device per core, as many as divide the 8 envs and the batch of 8.
+    devices = max(d for d in range(1, len(os.sched_getaffinity(0)) + 1) if 8 % d == 0)
+    assert f"on 8 envs ({devices} cpu device" in proc.stdout
 
 
 def test_saved_config_round_trips(trained):
@@ -127,7 +130,9 @@ def test_train_rejects_bad_input(trained, tmp_path):
     assert proc.returncode == 2 and "already holds a run; pass --resume" in proc.stderr
     proc = run("train.py", *TINY, "--seed", "4", "--run_dir", str(run_dir), "--resume", check=False)
     assert proc.returncode == 2 and "holds a different run: seed=3" in proc.stderr
-    assert not (tmp_path / "a").exists()
+    proc = run("train.py", *TINY, "--cpu_devices", "3", "--run_dir", str(tmp_path / "b"), check=False)
+    assert proc.returncode == 2 and "3 devices must divide --num_envs (8)" in proc.stderr
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
 
 
 def test_eval_rejects_corrupted_checkpoint(trained, tmp_path):
