@@ -18,10 +18,35 @@ from hexa_mjx import robot, training
 GL_PACKAGES = "libegl1 libegl-mesa0 libosmesa6"  # Debian/Ubuntu
 
 
+CONTACT_GROUPS = ("torso", "hip and knee links", "shins", "feet")
+
+
+def contact_groups(env) -> np.ndarray:
+    """Index into CONTACT_GROUPS for every geom of the model (the torso group includes the world)."""
+    m = env.mj_model
+    leg = np.asarray(env._geom_leg)
+    shin = np.isin(m.geom_bodyid, m.geom_bodyid[env._feet])  # the feet's own bodies: the last leg links
+    group = np.where(leg < 0, 0, np.where(shin, 2, 1))
+    group[env._feet] = 3
+    return group
+
+
+def group_contacts(env, data, groups) -> jax.Array:
+    """Floor contact points of one physics state, counted per CONTACT_GROUPS entry."""
+    from hexa_mjx.env import floor_contacts
+
+    geom1, geom2, dist = floor_contacts(data)
+    on_floor = (dist < 0) & ((geom1 == env._floor) | (geom2 == env._floor))
+    group = jp.asarray(groups)[jp.where(geom1 == env._floor, geom2, geom1)]
+    return jp.stack([(on_floor & (group == g)).sum() for g in range(len(CONTACT_GROUPS))])
+
+
 def rollout(env, policy, num_episodes: int, seed: int = 0):
     """Run `num_episodes` episodes in parallel to their end; returns per-step arrays (time first)
-    of qpos, reward, done, distance and the env's metrics, with `alive` marking steps in an episode."""
+    of qpos, reward, done, distance, floor contacts per CONTACT_GROUPS entry and the env's metrics,
+    with `alive` marking steps in an episode."""
     steps = env.config.episode_length
+    groups = contact_groups(env)
 
     @jax.jit
     def run(keys):
@@ -32,6 +57,7 @@ def rollout(env, policy, num_episodes: int, seed: int = 0):
             action = policy(state.obs, key)
             nxt = jax.vmap(env.step)(state, action)
             out = {"qpos": nxt.pipeline_state.qpos, "reward": nxt.reward, "done": nxt.done, "alive": alive,
+                   "contacts": jax.vmap(lambda d: group_contacts(env, d, groups))(nxt.pipeline_state),
                    **{k: v for k, v in nxt.metrics.items()
                       if k.startswith("reward/") or k in ("distance", "fell", "goal_bonus", "nonfinite")}}
             return (nxt, alive * (1.0 - nxt.done)), out
@@ -68,6 +94,12 @@ def episode_table(env, start_qpos, traj) -> dict:
         walking = alive * (np.minimum.accumulate(dist, axis=0) >= env.config.success_radius)
         per_episode["body_contact_before_goal"] = (traj["reward/body_contact"] * walking).sum(0)
         per_episode["steps_to_goal"] = walking.sum(0)
+    if "contacts" in traj:
+        # Mean floor contact points per step, by link group, before and after first reaching the goal.
+        reached = alive * (np.minimum.accumulate(dist, axis=0) < env.config.success_radius)
+        for phase, mask in (("before_goal", alive - reached), ("after_goal", reached)):
+            steps = np.maximum(mask.sum(0), 1)[:, None]
+            per_episode[f"contacts_{phase}"] = (traj["contacts"] * mask[..., None]).sum(0) / steps
     summary = {
         "episodes": int(alive.shape[1]),
         "success_rate": float(per_episode["success"].mean()),
@@ -83,6 +115,8 @@ def episode_table(env, start_qpos, traj) -> dict:
         "episode_length_mean": float(per_episode["length"].mean()),
         **{f"{k}_mean": float(per_episode[k].mean()) for k in ("body_contact_before_goal", "steps_to_goal")
            if k in per_episode},
+        **{f"contacts_{phase}": dict(zip(CONTACT_GROUPS, np.round(per_episode[f"contacts_{phase}"].mean(0), 3).tolist()))
+           for phase in ("before_goal", "after_goal") if f"contacts_{phase}" in per_episode},
         # Per-episode sums of each scaled reward term, averaged: e.g. body_contact near 0 means no crawling.
         "reward_terms": {k[len("reward/"):]: float((traj[k] * alive).sum(0).mean())
                          for k in traj if k.startswith("reward/")},
@@ -102,6 +136,10 @@ def format_table(summary: dict) -> str:
     if "body_contact_before_goal_mean" in summary:
         rows += [("steps before reaching the goal, mean", f"{summary['steps_to_goal_mean']:.0f}"),
                  ("body contact before the goal, mean", f"{summary['body_contact_before_goal_mean']:.1f}")]
+    for phase in ("before_goal", "after_goal"):
+        if f"contacts_{phase}" in summary:
+            counts = ", ".join(f"{k} {v:.2f}" for k, v in summary[f"contacts_{phase}"].items())
+            rows.append((f"floor contacts per step, {phase.replace('_', ' ')}", counts))
     rows += [(f"  reward/{k}, per episode", f"{v:.1f}") for k, v in summary["reward_terms"].items()]
     width = max(len(k) for k, _ in rows)
     return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)

@@ -111,11 +111,29 @@ def test_eval_writes_video_and_metrics(trained, cache_env, tmp_path):
     terms = result["summary"]["reward_terms"]
     assert {"goal_approach", "body_contact", "contact_quality", "height"} <= set(terms)
     assert terms["body_contact"] <= 0 and terms["height"] < 0
+    before = result["summary"]["contacts_before_goal"]
+    assert list(before) == list(evaluation.CONTACT_GROUPS) and before["feet"] > 0  # it starts on its feet
+    assert sum(result["summary"]["contacts_after_goal"].values()) == 0  # 20 steps never reach the goal
+    assert "floor contacts per step, before goal" in proc.stdout
     video = out / "episode_0.mp4"
     assert video.stat().st_size > 1000
     frames = np.array([f for f in imageio.get_reader(video)])
     assert len(frames) == 21  # start frame + 20 control steps
     assert np.abs(frames[0].astype(float) - frames[-1].astype(float)).mean() > 1.0  # the picture changes
+
+
+def test_contact_groups(env):
+    from hexa_mjx import robot
+
+    m, groups = env.mj_model, evaluation.contact_groups(env)
+    assert groups[m.geom(robot.TORSO_GEOM).id] == 0 and groups[m.geom(robot.FLOOR_GEOM).id] == 0
+    for leg in robot.LEGS:
+        foot = m.geom(robot.foot_geom(leg)).id
+        assert groups[foot] == 3
+        shin = [g for g in range(m.ngeom) if m.geom_bodyid[g] == m.geom_bodyid[foot] and g != foot]
+        assert shin and all(groups[g] == 2 for g in shin)
+    assert sum(groups == 1) == 12  # a hip and a knee servo per leg
+    assert sum(groups == 2) == sum(groups == 3) == 6
 
 
 def test_train_rejects_bad_input(trained, tmp_path):
