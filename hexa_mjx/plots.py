@@ -1,7 +1,7 @@
 """Learning curves from run directories' metrics.jsonl.
 
     python -m hexa_mjx.plots runs/goal_directed-s0 runs/goal_directed-s1 -o docs/img/curves.png
-    python -m hexa_mjx.plots --frames runs/goal_directed-s0/eval/episode_0.mp4 -o docs/img/frames.png
+    python -m hexa_mjx.plots --frames runs/goal_directed-s0/eval/episode_0.mp4 [--every 40 --count 6] -o frames.png
 
 One panel per figure (final distance to goal, success rate, episodic return, goal bonus)
 against environment steps, one line per run, labelled by the run directory's name.
@@ -67,12 +67,14 @@ def contact_sheet(video: Path, out: Path, count: int = 6, every: int = 40) -> Pa
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(prog="python -m hexa_mjx.plots", description=__doc__.split("\n\n")[0])
     parser.add_argument("runs", nargs="*", type=Path, help="run directories")
-    parser.add_argument("--frames", type=Path, help="instead: a row of frames from this MP4 (every 40th)")
+    parser.add_argument("--frames", type=Path, help="instead: a row of frames from this MP4")
+    parser.add_argument("--every", type=int, default=40, help="with --frames: frames apart (default: 40)")
+    parser.add_argument("--count", type=int, default=6, help="with --frames: how many (default: 6)")
     parser.add_argument("-o", "--out", type=Path, default=Path("curves.png"), help="PNG to write")
     parser.add_argument("--title", default="", help="figure title")
     args = parser.parse_args(argv)
     if args.frames:
-        print(f"wrote {contact_sheet(args.frames, args.out)}")
+        print(f"wrote {contact_sheet(args.frames, args.out, args.count, args.every)}")
     elif args.runs:
         print(f"wrote {plot_runs(args.runs, args.out, args.title)}")
     else:
