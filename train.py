@@ -14,7 +14,7 @@ from hexa_mjx import training
 
 def main(argv=None) -> int:
     cfg = training.parse_args(argv)
-    training.use_cpu_devices(cfg.cpu_devices)  # before anything starts JAX
+    training.prepare_jax(cfg.cpu_devices)  # before anything starts JAX
     try:
         training.validate(cfg)
     except (training.ConfigError, ValueError, TypeError) as e:

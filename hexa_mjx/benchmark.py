@@ -27,14 +27,14 @@ import hexa_mjx
 from hexa_mjx import robot
 
 
-def _rollout_fn(env, steps):
-    """A jitted batched rollout of `steps` control steps under uniform random actions."""
+def _rollout_fn(batched_step, action_size: int, steps: int):
+    """A jitted rollout of `steps` control steps of a batched step function under uniform random actions."""
     def run(state, rng):
         def body(carry, _):
             state, rng = carry
             rng, key = jax.random.split(rng)
-            action = jax.random.uniform(key, (state.obs.shape[0], env.action_size), minval=-1, maxval=1)
-            return (jax.vmap(env.step)(state, action), rng), None
+            action = jax.random.uniform(key, (state.obs.shape[0], action_size), minval=-1, maxval=1)
+            return (batched_step(state, action), rng), None
         (state, _), _ = jax.lax.scan(body, (state, rng), None, length=steps)
         return state
     return jax.jit(run)
@@ -43,7 +43,7 @@ def _rollout_fn(env, steps):
 def mjx_speed(env, batch: int, steps: int, repeats: int) -> dict:
     """Compile time and median env steps/s for one batch size."""
     reset = jax.jit(jax.vmap(env.reset))
-    run = _rollout_fn(env, steps)
+    run = _rollout_fn(jax.vmap(env.step), env.action_size, steps)
     state = reset(jax.random.split(jax.random.PRNGKey(0), batch))
     t0 = time.perf_counter()
     state = jax.block_until_ready(run(state, jax.random.PRNGKey(1)))
@@ -61,7 +61,7 @@ def mjx_speed(env, batch: int, steps: int, repeats: int) -> dict:
 def pmap_speed(env, batch: int, steps: int, repeats: int, devices: int) -> float:
     """Median env steps/s with the batch split over `devices` devices (pmap), as PPO splits it."""
     reset = jax.pmap(jax.vmap(env.reset))
-    run = jax.pmap(_rollout_fn(env, steps))
+    run = jax.pmap(_rollout_fn(jax.vmap(env.step), env.action_size, steps))
     state = reset(jax.random.split(jax.random.PRNGKey(0), batch).reshape(devices, batch // devices, -1))
     keys = jax.random.split(jax.random.PRNGKey(1), devices)
     return batch * steps / _timed(run, (state, keys), repeats)[1]
@@ -124,7 +124,6 @@ def train_speed(num_envs: int = 256, updates: int = 4, devices: int = 1) -> dict
 
     from hexa_mjx import training
 
-    jax.config.update("jax_pmap_shmap_merge", False)  # as train() does: one compile of the epoch
     cfg = training.TrainConfig(num_envs=num_envs)
     env = training.make_env_for(cfg)
     marks = [(0, time.perf_counter())]
@@ -182,20 +181,11 @@ def training_profile(num_envs: int = 256, repeats: int = 3, **overrides) -> dict
     steps = cfg.steps_per_update // num_envs  # control steps per env per update
     keys = jax.random.split(jax.random.PRNGKey(0), num_envs)
 
-    def random_rollout(wrapped):
-        def run(state, key):
-            def body(carry, _):
-                state, key = carry
-                key, sub = jax.random.split(key)
-                action = jax.random.uniform(sub, (num_envs, env.action_size), minval=-1, maxval=1)
-                return (wrapped.step(state, action), key), None
-            return jax.lax.scan(body, (state, key), None, length=steps)[0][0]
-        return jax.jit(run), jax.jit(wrapped.reset)(keys)
-
     out = {}
     for name, e in (("env", env), ("env_without_contacts", _without_contacts(env))):
-        run, state = random_rollout(envs.training.wrap(e, episode_length=cfg.episode_length))
-        out[name] = _timed(run, (state, jax.random.PRNGKey(1)), repeats)[1]
+        wrapped = envs.training.wrap(e, episode_length=cfg.episode_length)  # batched, as PPO steps it
+        run = _rollout_fn(wrapped.step, env.action_size, steps)
+        out[name] = _timed(run, (jax.jit(wrapped.reset)(keys), jax.random.PRNGKey(1)), repeats)[1]
 
     # Acting as brax's PPO does it: the policy samples actions, trajectories are regrouped for SGD.
     wrapped = envs.training.wrap(env, episode_length=cfg.episode_length)
@@ -265,7 +255,7 @@ def main(argv=None) -> None:
 
     from hexa_mjx import training
 
-    training.use_cpu_devices()  # one CPU device per core, as train.py has; single-device timings use one
+    training.prepare_jax()  # as train.py does; single-device timings use one of the CPU devices
     env = hexa_mjx.make_env(ctrl_hz=args.ctrl_hz)
     m = env.mj_model
     print(f"model: {env.config.model_path}  nv={m.nv} nu={m.nu} ngeom={m.ngeom} "

@@ -212,12 +212,16 @@ class HexapodEnv(Env):
         return jp.concatenate([data.qpos[:3], data.qpos[3:7], data.qvel[:3], angvel_world,
                                data.qpos[7:], data.qvel[6:], goal_vec, jp.linalg.norm(goal_vec)[None]])
 
+    def floor_contact_geoms(self, data: mjx.Data):
+        """(active robot-floor contact mask, the robot geom of each contact) over MJX's contact slots."""
+        geom1, geom2, dist = floor_contacts(data)
+        on_floor = (dist < 0) & ((geom1 == self._floor) | (geom2 == self._floor))
+        return on_floor, jp.where(geom1 == self._floor, geom2, geom1)
+
     def contact_counts(self, data: mjx.Data):
         """Floor contacts of a physics state: (leg contacts while that leg's foot is lifted
         more than `lift_clearance`, contacts of any non-foot geom), from MJX's contact arrays."""
-        geom1, geom2, dist = floor_contacts(data)
-        on_floor = (dist < 0) & ((geom1 == self._floor) | (geom2 == self._floor))
-        other = jp.where(geom1 == self._floor, geom2, geom1)
+        on_floor, other = self.floor_contact_geoms(data)
         leg = self._geom_leg[other]
         foot_clearance = data.geom_xpos[self._feet, 2] - self.mj_model.geom_size[self._feet, 0]
         lifted = foot_clearance[jp.maximum(leg, 0)] > self.config.lift_clearance

@@ -33,11 +33,8 @@ def contact_groups(env) -> np.ndarray:
 
 def group_contacts(env, data, groups) -> jax.Array:
     """Floor contact points of one physics state, counted per CONTACT_GROUPS entry."""
-    from hexa_mjx.env import floor_contacts
-
-    geom1, geom2, dist = floor_contacts(data)
-    on_floor = (dist < 0) & ((geom1 == env._floor) | (geom2 == env._floor))
-    group = jp.asarray(groups)[jp.where(geom1 == env._floor, geom2, geom1)]
+    on_floor, geom = env.floor_contact_geoms(data)
+    group = jp.asarray(groups)[geom]
     return jp.stack([(on_floor & (group == g)).sum() for g in range(len(CONTACT_GROUPS))])
 
 
@@ -89,15 +86,15 @@ def episode_table(env, start_qpos, traj) -> dict:
         "mean_speed": np.linalg.norm(final_xy - start_qpos[:, :2], axis=1) / (length * env.dt),
         "length": length,
     }
+    # Steps before the goal radius is first reached; the rest of the episode is "after the goal".
+    walking = alive * (np.minimum.accumulate(dist, axis=0) >= env.config.success_radius)
     if "reward/body_contact" in traj:
         # Crawling shows on the way to the goal: body contacts before the goal radius is first reached.
-        walking = alive * (np.minimum.accumulate(dist, axis=0) >= env.config.success_radius)
         per_episode["body_contact_before_goal"] = (traj["reward/body_contact"] * walking).sum(0)
         per_episode["steps_to_goal"] = walking.sum(0)
     if "contacts" in traj:
         # Mean floor contact points per step, by link group, before and after first reaching the goal.
-        reached = alive * (np.minimum.accumulate(dist, axis=0) < env.config.success_radius)
-        for phase, mask in (("before_goal", alive - reached), ("after_goal", reached)):
+        for phase, mask in (("before_goal", walking), ("after_goal", alive - walking)):
             steps = np.maximum(mask.sum(0), 1)[:, None]
             per_episode[f"contacts_{phase}"] = (traj["contacts"] * mask[..., None]).sum(0) / steps
     summary = {

@@ -219,7 +219,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     try:
         if args.study != "aggregate":
-            training.use_cpu_devices()  # before anything starts JAX: one device per core
+            training.prepare_jax()  # before anything starts JAX: one device per core
             runs = grid(args.study, args.out, args.timesteps, args.seeds, args.num_envs)
             for run in runs:  # every run's settings are checked before the first one compiles
                 training.validate(dataclasses.replace(run.config, resume=status(run) != "new"))

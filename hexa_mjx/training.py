@@ -121,16 +121,20 @@ def default_run_dir(cfg: TrainConfig) -> Path:
     return Path("runs") / f"{cfg.reward}{ablations}-s{cfg.seed}"
 
 
-def use_cpu_devices(n: int = 0) -> None:
-    """Ask XLA for `n` CPU devices (0: one per core) before JAX starts; a no-op once it has started.
+def prepare_jax(cpu_devices: int = 0) -> None:
+    """Set JAX up for brax's PPO: call before anything else touches JAX.
 
-    XLA runs one vmapped MJX step on about one core, so on a CPU one device leaves the other cores
-    idle; brax's PPO splits environments and minibatches over devices with pmap instead.
+    Asks XLA for `cpu_devices` CPU devices (0: one per core; too late once JAX has started): XLA
+    runs one vmapped MJX step on about one core, so one device leaves the other cores idle, and
+    brax's PPO splits environments and minibatches over devices with pmap instead. Also selects
+    the classic pmap: under jax 0.9's shard_map-based one, brax's training epoch compiles a second
+    time on its second call (17 s here).
     """
     from jax._src import xla_bridge
 
     if not xla_bridge.backends_are_initialized():
-        jax.config.update("jax_num_cpu_devices", n or len(os.sched_getaffinity(0)))
+        jax.config.update("jax_num_cpu_devices", cpu_devices or len(os.sched_getaffinity(0)))
+    jax.config.update("jax_pmap_shmap_merge", False)
 
 
 def devices_for(cfg: TrainConfig) -> int:
@@ -160,7 +164,7 @@ def validate(cfg: TrainConfig) -> TrainConfig:
     if jax.default_backend() == "cpu" and devices > jax.local_device_count():
         raise ConfigError(f"--cpu_devices {devices} but JAX has {jax.local_device_count()} CPU devices: it had "
                           "started before train() could ask for more; use train.py, or call "
-                          "hexa_mjx.training.use_cpu_devices() before anything else touches JAX")
+                          "hexa_mjx.training.prepare_jax() before anything else touches JAX")
     if cfg.num_envs % devices or cfg.batch_size % devices:
         raise ConfigError(f"{devices} devices must divide --num_envs ({cfg.num_envs}) and --batch_size "
                           f"({cfg.batch_size}); change them or --cpu_devices")
@@ -375,10 +379,7 @@ def train(cfg: TrainConfig) -> dict:
     """Run (or resume) PPO for `cfg`; returns the last evaluation row."""
     from brax.training.agents.ppo import train as ppo
 
-    use_cpu_devices(cfg.cpu_devices)
-    # jax 0.9 implements pmap with shard_map by default, under which brax's training epoch compiles
-    # a second time on its second call (17 s here); the classic pmap compiles it once.
-    jax.config.update("jax_pmap_shmap_merge", False)
+    prepare_jax(cpu_devices=cfg.cpu_devices)
     cfg = validate(cfg)
     run_dir = Path(cfg.run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
