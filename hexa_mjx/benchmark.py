@@ -234,7 +234,28 @@ def training_profile(num_envs: int = 256, repeats: int = 3, **overrides) -> dict
             return (opt_state, params, key), None
         return jax.lax.scan(epoch, (opt_state, params, key), (), length=cfg.update_epochs)[0][1]
     out["sgd"] = _timed(jax.jit(sgd), (params, optimizer.init(params), jax.random.PRNGKey(2)), repeats)[1]
+    out["sgd_flop"] = sgd_flop(cfg, env)
+    out["matmul_flop_per_s"] = matmul_speed(cfg.batch_size * cfg.unroll_length, cfg.hidden[-1], repeats)
     return out
+
+
+def sgd_flop(cfg, env) -> float:
+    """Floating-point operations of one update's SGD, counting the dense layers only: every epoch
+    runs each sample forward and backward (about 3x the forward cost) through the policy and
+    value networks; a multiply-add is 2 FLOP."""
+    def macs(sizes):
+        return sum(a * b for a, b in zip(sizes[:-1], sizes[1:]))
+    obs = env.observation_size
+    per_sample = macs([obs, *cfg.hidden, 2 * env.action_size]) + macs([obs, *cfg.hidden, 1])
+    return 2 * 3 * per_sample * cfg.steps_per_update * cfg.update_epochs
+
+
+def matmul_speed(rows: int, width: int, repeats: int, layers: int = 200) -> float:
+    """FLOP/s of a chain of (rows x width) @ (width x width) products with tanh, the shape of one
+    minibatch through a hidden layer: what the SGD could reach if it were all matmul."""
+    x, w = jp.ones((rows, width)), jp.full((width, width), 1.0 / width)
+    chain = jax.jit(lambda x, w: jax.lax.fori_loop(0, layers, lambda _, h: jp.tanh(h @ w), x))
+    return 2 * rows * width * width * layers / _timed(chain, (x, w), repeats)[1]
 
 
 def main(argv=None) -> None:
@@ -283,6 +304,9 @@ def main(argv=None) -> None:
         for name, sec in parts.items():
             print(f"  {name:<28} {sec * 1000:7.0f} ms  {sec / total:5.0%}")
         print(f"  learner (policy + SGD) adds {(total - p['env']) / p['env']:.0%} to the environment time")
+        print(f"  SGD: {p['sgd_flop'] / 1e9:.0f} GFLOP per update in dense layers = "
+              f"{p['sgd_flop'] / p['sgd'] / 1e9:.0f} GFLOP/s; a matmul chain of one minibatch's shape runs at "
+              f"{p['matmul_flop_per_s'] / 1e9:.0f} GFLOP/s here")
     if args.train:
         cores = jax.local_device_count()
         env_rates = {1: mjx_speed(env, args.batches[-1], args.steps, args.repeats)["env_steps_per_s"]}

@@ -49,6 +49,9 @@ class EnvConfig:
     target_height: float = 0.12  # m, torso-origin height the height term aims for
     lift_clearance: float = 0.02  # m, foot height above which a leg's floor contact is "bad"
     settle_steps: int = 100  # physics steps the start pose settles before the first observation
+    # Start-state noise, drawn per reset (the report starts every episode from the same pose).
+    start_joint_noise: float = 0.0  # rad, each joint's start angle is offset uniformly in +-this
+    start_yaw_noise: float = 0.0  # rad, the start heading is turned uniformly in +-this (goal stays at +x)
     solver_iterations: int | None = None  # None: the model's own setting
     ls_iterations: int | None = None
 
@@ -65,6 +68,12 @@ def roll_pitch(quat):
     roll = jp.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
     pitch = jp.arcsin(jp.clip(2 * (w * y - z * x), -1.0, 1.0))
     return roll, pitch
+
+
+def _quat_mul(a, b):
+    """Hamilton product of two (w, x, y, z) quaternions."""
+    return jp.concatenate([a[:1] * b[:1] - a[1:] @ b[1:],
+                           a[0] * b[1:] + b[0] * a[1:] + jp.cross(a[1:], b[1:])])
 
 
 def _rotate(vec, quat):
@@ -98,6 +107,9 @@ class HexapodEnv(Env):
         self.n_substeps = int(round(substeps))
         if config.episode_length < 1:
             raise ValueError(f"episode_length must be at least 1, got {config.episode_length}")
+        for name in ("start_joint_noise", "start_yaw_noise"):
+            if not 0 <= getattr(config, name) <= np.pi:
+                raise ValueError(f"{name} is a range in radians from 0 to pi, got {getattr(config, name)}")
 
         self._floor = model.geom(robot.FLOOR_GEOM).id
         self._torso = model.body(robot.TORSO_BODY).id
@@ -125,6 +137,8 @@ class HexapodEnv(Env):
             mujoco.mj_step(model, data)
         self._qpos0, self._qvel0, self._ctrl0 = (jp.asarray(x, dtype=jp.float32) for x in (data.qpos, data.qvel, data.ctrl))
         self._start_xy = jp.asarray(data.qpos[:2], dtype=jp.float32)
+        hinge_range = model.jnt_range[model.jnt_type == mujoco.mjtJoint.mjJNT_HINGE]
+        self._joint_lo, self._joint_hi = (jp.asarray(x, dtype=jp.float32) for x in hinge_range.T)
         self._goal = self._start_xy + jp.array([config.goal_distance, 0.0])
         self.mjx_model = mjx.put_model(model, impl="jax")
         self._data0 = mjx.make_data(self.mjx_model, impl="jax")
@@ -149,16 +163,16 @@ class HexapodEnv(Env):
         return self.n_substeps * float(self.mj_model.opt.timestep)
 
     def reset(self, rng: jax.Array) -> State:
-        """Start an episode from the settled standing pose."""
+        """Start an episode from the settled standing pose, perturbed by the start noise."""
         mocap = self._data0.mocap_pos.at[self._goal_mocap, :2].set(self._goal)
-        data = self._data0.replace(qpos=self._qpos0, qvel=self._qvel0, ctrl=self._ctrl0, mocap_pos=mocap)
+        data = self.restart(self._data0.replace(mocap_pos=mocap), rng)
         data = mjx.forward(self.mjx_model, data)
         zero = jp.zeros(())
         metrics = {f"reward/{name}": zero for name in self._active_terms()}
         metrics.update(distance=self._distance(data), success=zero, fell=zero, nonfinite=zero, goal_bonus=zero,
                        final_distance=zero, final_success=zero)
         info = {"rng": rng, "t": jp.zeros((), jp.int32), "success": zero}
-        return State(data, self._obs(data), zero, zero, metrics, info)
+        return State(data, self.observe(data), zero, zero, metrics, info)
 
     def step(self, state: State, action: jax.Array) -> State:
         """Apply one control step: position targets from `action` in [-1, 1], `n_substeps` physics steps."""
@@ -195,8 +209,24 @@ class HexapodEnv(Env):
                        nonfinite=(~finite).astype(jp.float32),
                        goal_bonus=REPORT_GOAL_BONUS * rewards.goal_bonus(dist, self.config.success_radius),
                        final_distance=jp.where(over, dist, 0.0), final_success=jp.where(over, success, 0.0))
-        return state.replace(pipeline_state=data, obs=self._obs(data), reward=reward,
+        return state.replace(pipeline_state=data, obs=self.observe(data), reward=reward,
                              done=done.astype(jp.float32), metrics=metrics, info=info)
+
+    def restart(self, data: mjx.Data, rng: jax.Array) -> mjx.Data:
+        """`data` with a fresh start state (qpos, qvel, ctrl, time) drawn with `rng`.
+
+        Quantities derived from the state (positions, contacts) are left as they are: the next
+        `mjx.step` recomputes them from qpos and qvel, and the observation needs only those.
+        """
+        qpos = self._qpos0
+        if self.config.start_joint_noise or self.config.start_yaw_noise:
+            k_joint, k_yaw = jax.random.split(rng)
+            noise = self.config.start_joint_noise
+            joints = qpos[7:] + jax.random.uniform(k_joint, qpos[7:].shape, minval=-noise, maxval=noise)
+            half_yaw = 0.5 * jax.random.uniform(k_yaw, minval=-1.0, maxval=1.0) * self.config.start_yaw_noise
+            quat = _quat_mul(jp.array([jp.cos(half_yaw), 0.0, 0.0, jp.sin(half_yaw)]), qpos[3:7])
+            qpos = jp.concatenate([qpos[:3], quat, jp.clip(joints, self._joint_lo, self._joint_hi)])
+        return data.replace(qpos=qpos, qvel=self._qvel0, ctrl=self._ctrl0, time=jp.zeros_like(data.time))
 
     # -- internals ------------------------------------------------------------
 
@@ -206,7 +236,8 @@ class HexapodEnv(Env):
     def _distance(self, data):
         return jp.linalg.norm(self._goal - data.qpos[:2])
 
-    def _obs(self, data):
+    def observe(self, data: mjx.Data) -> jax.Array:
+        """The policy's observation of a physics state (reads only qpos and qvel)."""
         goal_vec = self._goal - data.qpos[:2]
         angvel_world = _rotate(data.qvel[3:6], data.qpos[3:7])  # free-joint angular velocity is body-frame
         return jp.concatenate([data.qpos[:3], data.qpos[3:7], data.qvel[:3], angvel_world,

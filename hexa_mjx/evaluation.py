@@ -176,19 +176,24 @@ def render_video(env, qpos_frames: np.ndarray, path: Path, width=640, height=480
 
 
 def evaluate(ckpt: str | Path, episodes: int = 128, videos: int = 1, out: str | Path | None = None,
-             seed: int = 0, video: bool = True) -> dict:
-    """Load a checkpoint, run `episodes` deterministic episodes, write metrics JSON and videos."""
+             seed: int = 0, video: bool = True, **start_noise) -> dict:
+    """Load a checkpoint, run `episodes` deterministic episodes, write metrics JSON and videos.
+
+    `start_joint_noise` / `start_yaw_noise` keywords replace the run's start noise (rad); with
+    none, every episode starts from the same state and the episodes differ only by numerics.
+    """
     run_dir, ckpt_dir = training.resolve_checkpoint(Path(ckpt))
     cfg = training.load_config(run_dir)
-    env = training.make_env_for(cfg)
+    env = training.make_env_for(cfg, **{k: v for k, v in start_noise.items() if v is not None})
     step, params = training.load_checkpoint(ckpt_dir, training.init_params(cfg, env))
     policy = training.make_inference(cfg, env, params, deterministic=True)
     start, traj = rollout(env, policy, episodes, seed)
     table = episode_table(env, start, traj)
     out = Path(out) if out else run_dir / "eval"
     out.mkdir(parents=True, exist_ok=True)
-    result = {"checkpoint": str(ckpt_dir), "step": step, "config": {"reward": cfg.reward, "ablate": cfg.ablate,
-                                                                       "seed": cfg.seed}, **table, "videos": []}
+    run = {"reward": cfg.reward, "ablate": cfg.ablate, "seed": cfg.seed,
+           "start_joint_noise": env.config.start_joint_noise, "start_yaw_noise": env.config.start_yaw_noise}
+    result = {"checkpoint": str(ckpt_dir), "step": step, "config": run, **table, "videos": []}
     if video:
         for i in range(min(videos, episodes)):
             n = int(traj["alive"][:, i].sum())

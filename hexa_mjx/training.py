@@ -72,6 +72,10 @@ class TrainConfig:
     mean_init_scale: float = dataclasses.field(default=0.01, metadata={
         "help": "init scale of the policy mean's output layer (CleanRL: 0.01, so early actions are near 0)"})
     episode_length: int = dataclasses.field(default=1000, metadata={"help": "control steps per episode"})
+    start_joint_noise: float = dataclasses.field(default=0.0, metadata={
+        "help": "rad, uniform noise on each joint's start angle, drawn per episode (0: the report's fixed start)"})
+    start_yaw_noise: float = dataclasses.field(default=0.0, metadata={
+        "help": "rad, uniform noise on the start heading, drawn per episode"})
     num_eval_envs: int = dataclasses.field(default=32, metadata={
         "help": "episodes per evaluation (deterministic policy)"})
     cpu_devices: int = dataclasses.field(default=0, metadata={
@@ -178,7 +182,8 @@ def validate(cfg: TrainConfig) -> TrainConfig:
         if not cfg.resume:
             raise ConfigError(f"{run_dir} already holds a run; pass --resume to continue it, "
                               "or choose another --run_dir")
-        old = json.loads(saved.read_text())
+        # A setting added after the run was made has its default there.
+        old = {**dataclasses.asdict(TrainConfig()), **json.loads(saved.read_text())}
         changed = sorted(k for k, v in dataclasses.asdict(cfg).items()
                          if k not in RESUMABLE and old.get(k) != v)
         if changed:
@@ -289,9 +294,11 @@ def load_config(run_dir: Path) -> TrainConfig:
     return TrainConfig(**{k: v for k, v in data.items() if k in known})
 
 
-def make_env_for(cfg: TrainConfig):
-    return hexa_mjx.make_env(cfg.reward, ablate=tuple(cfg.ablate), ctrl_hz=cfg.ctrl_hz,
-                             episode_length=cfg.episode_length)
+def make_env_for(cfg: TrainConfig, **overrides):
+    """The run's environment; keyword overrides set `EnvConfig` fields (eval's start noise)."""
+    settings = dict(ablate=tuple(cfg.ablate), ctrl_hz=cfg.ctrl_hz, episode_length=cfg.episode_length,
+                    start_joint_noise=cfg.start_joint_noise, start_yaw_noise=cfg.start_yaw_noise)
+    return hexa_mjx.make_env(cfg.reward, **{**settings, **overrides})
 
 
 def make_inference(cfg: TrainConfig, env, params, deterministic=True):
@@ -375,6 +382,13 @@ def ppo_settings(cfg: TrainConfig) -> dict:
                 network_factory=network_factory(cfg))
 
 
+def wrap_env_fn(cfg: TrainConfig):
+    """brax's training wrappers, or ours that redraw the start noise every episode."""
+    from hexa_mjx import wrappers
+
+    return wrappers.wrap_for_training if cfg.start_joint_noise or cfg.start_yaw_noise else None
+
+
 def train(cfg: TrainConfig) -> dict:
     """Run (or resume) PPO for `cfg`; returns the last evaluation row."""
     from brax.training.agents.ppo import train as ppo
@@ -413,7 +427,7 @@ def train(cfg: TrainConfig) -> dict:
           f"{cfg.num_envs} envs ({devices} {jax.default_backend()} device{'s' * (devices > 1)}), "
           f"{cfg.steps_per_update:,} steps per update -> {run_dir}", flush=True)
     ppo.train(environment=env, num_timesteps=remaining, **ppo_settings(cfg), seed=cfg.seed + start_step,
-              max_devices_per_host=devices,
+              max_devices_per_host=devices, wrap_env_fn=wrap_env_fn(cfg),
               num_evals=cfg.num_evals, num_eval_envs=cfg.num_eval_envs, deterministic_eval=True,
               progress_fn=on_progress, policy_params_fn=on_params, restore_params=restore)
     logger.close()

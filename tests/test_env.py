@@ -185,6 +185,26 @@ def test_episode_boundary_under_brax_autoreset(env):
     assert np.all(np.asarray(state.metrics["success"]) == 0)
 
 
+def test_start_noise_is_drawn_per_reset(env, state0):
+    noisy = hexa_mjx.make_env(start_joint_noise=0.1, start_yaw_noise=0.3)
+    states = jax.jit(jax.vmap(noisy.reset))(jax.random.split(jax.random.PRNGKey(1), 64))
+    qpos = np.asarray(states.pipeline_state.qpos)
+    offsets = qpos[:, 7:] - np.asarray(env._qpos0[7:])
+    assert np.abs(offsets).max() <= 0.1 + 1e-6 and np.abs(offsets).max() > 0.09  # fills the range
+    assert len(np.unique(offsets[:, 0])) == 64  # a different start for every key
+    low, high = env.mj_model.jnt_range[1:].T
+    assert np.all(qpos[:, 7:] >= low - 1e-6) and np.all(qpos[:, 7:] <= high + 1e-6)
+    w, z = qpos[:, 3], qpos[:, 6]  # the settled start is level, so the noise is a pure yaw
+    yaw = 2 * np.arctan2(z, w) - 2 * np.arctan2(float(env._qpos0[6]), float(env._qpos0[3]))
+    assert np.abs(yaw).max() <= 0.3 + 1e-4 and np.abs(yaw).max() > 0.25
+    np.testing.assert_allclose(np.linalg.norm(qpos[:, 3:7], axis=1), 1.0, atol=1e-6)
+    np.testing.assert_allclose(states.obs, jax.vmap(noisy.observe)(states.pipeline_state), rtol=1e-6, atol=1e-9)
+    # Without noise, every key gives the settled start exactly.
+    other = jax.jit(env.reset)(jax.random.PRNGKey(7))
+    np.testing.assert_array_equal(other.pipeline_state.qpos, state0.pipeline_state.qpos)
+    np.testing.assert_array_equal(state0.pipeline_state.qpos, env._qpos0)
+
+
 def test_every_variant_and_ablation_builds():
     for reward in rewards.VARIANTS:
         for ablation in [None, *rewards.ABLATIONS]:
@@ -212,6 +232,8 @@ def test_bad_settings_give_clear_errors():
         hexa_mjx.make_env(ctrl_rate=50)
     with pytest.raises(ValueError, match="ctrl_hz=50 is not the 240 Hz physics rate divided by a whole number"):
         hexa_mjx.make_env(ctrl_hz=50)
+    with pytest.raises(ValueError, match="start_yaw_noise is a range in radians from 0 to pi, got -0.1"):
+        hexa_mjx.make_env(start_yaw_noise=-0.1)
     with pytest.raises(ValueError, match="unknown ablation"):
         hexa_mjx.make_env(ablate="legs")
     assert hexa_mjx.make_env(ctrl_hz=30).n_substeps == 8

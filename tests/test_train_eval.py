@@ -20,6 +20,10 @@ TINY = ["--num_envs", "8", "--batch_size", "8", "--num_minibatches", "2", "--unr
         "--num_evals", "2", "--num_eval_envs", "2", "--episode_length", "20"]
 
 
+# The trained fixture draws start noise per episode (hexa_mjx.wrappers instead of brax's auto-reset).
+NOISE = ["--start_joint_noise", "0.05", "--start_yaw_noise", "0.1"]
+
+
 @pytest.fixture(scope="session")
 def cache_env(tmp_path_factory):
     """Subprocess environment sharing one fresh XLA compilation cache (later runs reuse compiles)."""
@@ -37,7 +41,8 @@ def run(script, *args, env=None, check=True):
 @pytest.fixture(scope="session")
 def trained(tmp_path_factory, cache_env):
     run_dir = tmp_path_factory.mktemp("runs") / "tiny"
-    proc = run("train.py", *TINY, "--num_timesteps", "64", "--seed", "3", "--run_dir", str(run_dir), env=cache_env)
+    proc = run("train.py", *TINY, *NOISE, "--num_timesteps", "64", "--seed", "3", "--run_dir", str(run_dir),
+               env=cache_env)
     return run_dir, proc
 
 
@@ -60,8 +65,8 @@ def test_train_writes_run_directory(trained):
 def test_saved_config_round_trips(trained):
     run_dir, _ = trained
     saved = training.load_config(run_dir)
-    flags = training.parse_args([*TINY, "--num_timesteps", "64", "--seed", "3", "--run_dir", str(run_dir)])
-    assert saved == flags
+    flags = training.parse_args([*TINY, *NOISE, "--num_timesteps", "64", "--seed", "3", "--run_dir", str(run_dir)])
+    assert saved == flags and saved.start_yaw_noise == 0.1
     assert saved.seed == 3 and saved.hidden == [256, 256] and saved.discount == 0.99
 
 
@@ -71,11 +76,23 @@ def test_resume_continues_step_count(trained, cache_env, tmp_path):
     subprocess.run(["cp", "-r", str(run_dir), str(resumed)], check=True)
     # A checkpoint interrupted mid-write (killed before its rename) must be ignored.
     (resumed / "checkpoints" / "tmp-000000000128-999").mkdir()
-    proc = run("train.py", *TINY, "--num_timesteps", "128", "--seed", "3", "--run_dir", str(resumed), "--resume",
-               env=cache_env)
+    proc = run("train.py", *TINY, *NOISE, "--num_timesteps", "128", "--seed", "3", "--run_dir", str(resumed),
+               "--resume", env=cache_env)
     assert "resuming" in proc.stdout and "from step 64" in proc.stdout
     assert [r["step"] for r in rows(resumed)] == [0, 64, 128]
     assert [step for step, _ in training.list_checkpoints(resumed)] == [64, 128]
+
+
+def test_runs_from_before_a_new_setting_resume(tmp_path):
+    """A config.json written before a setting existed reads as that setting's default."""
+    cfg = training.validate(training.TrainConfig(run_dir=str(tmp_path / "old")))
+    old = dataclasses.asdict(cfg)
+    del old["start_joint_noise"], old["start_yaw_noise"]
+    (tmp_path / "old" / "config.json").parent.mkdir()
+    (tmp_path / "old" / "config.json").write_text(json.dumps(old))
+    training.validate(dataclasses.replace(cfg, resume=True))
+    with pytest.raises(training.ConfigError, match="holds a different run: start_yaw_noise=0.0"):
+        training.validate(dataclasses.replace(cfg, resume=True, start_yaw_noise=0.2))
 
 
 def test_checkpoint_restores_same_actions(tmp_path):
@@ -101,9 +118,12 @@ def test_checkpoint_restores_same_actions(tmp_path):
 def test_eval_writes_video_and_metrics(trained, cache_env, tmp_path):
     run_dir, _ = trained
     out = tmp_path / "eval"
-    proc = run("eval.py", "--ckpt", str(run_dir), "--episodes", "3", "--out", str(out), env=cache_env)
+    proc = run("eval.py", "--ckpt", str(run_dir), "--episodes", "3", "--out", str(out), "--start_yaw_noise", "0.2",
+               env=cache_env)
     assert "success rate" in proc.stdout and "fall rate" in proc.stdout
     result = json.loads((out / "metrics.json").read_text())
+    # The run's joint noise, the command line's yaw noise.
+    assert (result["config"]["start_joint_noise"], result["config"]["start_yaw_noise"]) == (0.05, 0.2)
     assert result["step"] == 64 and result["summary"]["episodes"] == 3
     assert {"success_rate", "final_distance_mean", "final_distance_median", "min_distance_mean", "goal_bonus_mean",
             "return_mean", "fall_rate", "mean_speed"} <= set(result["summary"])

@@ -1,0 +1,50 @@
+"""Training wrappers: brax's, except that every episode draws a fresh start state.
+
+brax's AutoResetWrapper restarts a finished environment from the state of its first reset, so
+start-state noise would be drawn once per environment, not once per episode. `FreshStartAutoReset`
+draws it again at every episode boundary (`HexapodEnv.restart`), from a key kept per environment.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jp
+from brax.envs.base import State, Wrapper
+from brax.envs.wrappers import training as brax_training
+
+
+def _where_done(done, new, old):
+    return jp.where(done.reshape(done.shape + (1,) * (new.ndim - done.ndim)), new, old)
+
+
+class FreshStartAutoReset(Wrapper):
+    """Auto-reset a batch of environments to a newly drawn start state when an episode ends."""
+
+    def reset(self, rng: jax.Array) -> State:
+        state = self.env.reset(rng)
+        # Physics-state template the fresh starts are written into (same structure as every state).
+        state.info["first_pipeline_state"] = state.pipeline_state
+        state.info["restart_rng"] = jax.vmap(lambda k: jax.random.fold_in(k, 1))(rng)
+        return state
+
+    def step(self, state: State, action: jax.Array) -> State:
+        if "steps" in state.info:
+            state.info.update(steps=jp.where(state.done, 0, state.info["steps"]))
+        state = self.env.step(state.replace(done=jp.zeros_like(state.done)), action)
+        base = self.env.unwrapped
+        keys = jax.vmap(jax.random.split)(state.info["restart_rng"])
+        fresh = jax.vmap(base.restart)(state.info["first_pipeline_state"], keys[:, 1])
+        pipeline_state = jax.tree.map(lambda new, old: _where_done(state.done, new, old), fresh,
+                                      state.pipeline_state)
+        obs = _where_done(state.done, jax.vmap(base.observe)(fresh), state.obs)
+        state.info["restart_rng"] = _where_done(state.done, keys[:, 0], state.info["restart_rng"])
+        return state.replace(pipeline_state=pipeline_state, obs=obs)
+
+
+def wrap_for_training(env, episode_length: int = 1000, action_repeat: int = 1, randomization_fn=None):
+    """brax's `envs.training.wrap` with `FreshStartAutoReset` in place of its AutoResetWrapper."""
+    if randomization_fn is not None:
+        raise NotImplementedError("domain randomization is not supported by FreshStartAutoReset")
+    env = brax_training.VmapWrapper(env)
+    env = brax_training.EpisodeWrapper(env, episode_length, action_repeat)
+    return FreshStartAutoReset(env)

@@ -1,0 +1,64 @@
+"""FreshStartAutoReset on a toy environment: a new start state is drawn at every episode boundary."""
+
+import jax
+import jax.numpy as jp
+import numpy as np
+from brax.envs.base import Env, State
+
+from hexa_mjx import wrappers
+
+
+class Toy(Env):
+    """x starts uniform in [0, 1) and moves by the action; the episode ends when x > 10."""
+
+    def restart(self, data, rng):
+        return {"x": jax.random.uniform(rng, (1,)), "t": jp.zeros(())}
+
+    def observe(self, data):
+        return jp.concatenate([data["x"], data["t"][None]])
+
+    def reset(self, rng):
+        data = self.restart(None, rng)
+        return State(data, self.observe(data), jp.zeros(()), jp.zeros(()), {}, {})
+
+    def step(self, state, action):
+        data = {"x": state.pipeline_state["x"] + action, "t": state.pipeline_state["t"] + 1}
+        return state.replace(pipeline_state=data, obs=self.observe(data), done=(data["x"][0] > 10).astype(float))
+
+    @property
+    def observation_size(self):
+        return 2
+
+    @property
+    def action_size(self):
+        return 1
+
+    @property
+    def backend(self):
+        return "toy"
+
+
+def test_every_episode_starts_from_a_fresh_draw():
+    env = wrappers.wrap_for_training(Toy(), episode_length=100)
+    state = jax.jit(env.reset)(jax.random.split(jax.random.PRNGKey(0), 2))
+    step = jax.jit(env.step)
+    first = np.asarray(state.pipeline_state["x"][:, 0])
+    push = jp.array([[20.0], [0.0]])  # env 0 ends its episode every step, env 1 never
+    starts = []
+    for _ in range(3):
+        state = step(state, push)
+        np.testing.assert_array_equal(state.done, [1.0, 0.0])
+        x, t = np.asarray(state.pipeline_state["x"][:, 0]), np.asarray(state.pipeline_state["t"])
+        assert 0 <= x[0] < 1 and t[0] == 0  # env 0 restarted
+        np.testing.assert_array_equal(state.obs, np.stack([x, t], axis=1))  # observation of the new start
+        starts.append(x[0])
+        assert x[1] == first[1] and t[1] == len(starts)  # env 1 untouched
+        np.testing.assert_array_equal(state.info["steps"], [1.0, len(starts)])  # brax: steps of the ended episode
+    assert len({first[0], *starts}) == 4  # four episodes, four different starts
+
+
+def test_zero_noise_uses_brax_wrappers():
+    from hexa_mjx import training
+
+    assert training.wrap_env_fn(training.TrainConfig()) is None
+    assert training.wrap_env_fn(training.TrainConfig(start_yaw_noise=0.1)) is wrappers.wrap_for_training
