@@ -228,14 +228,6 @@ class HexapodEnv(Env):
             qpos = jp.concatenate([qpos[:3], quat, jp.clip(joints, self._joint_lo, self._joint_hi)])
         return data.replace(qpos=qpos, qvel=self._qvel0, ctrl=self._ctrl0, time=jp.zeros_like(data.time))
 
-    # -- internals ------------------------------------------------------------
-
-    def _active_terms(self):
-        return [name for name, scale in self.scales.items() if scale != 0.0]
-
-    def _distance(self, data):
-        return jp.linalg.norm(self._goal - data.qpos[:2])
-
     def observe(self, data: mjx.Data) -> jax.Array:
         """The policy's observation of a physics state (reads only qpos and qvel)."""
         goal_vec = self._goal - data.qpos[:2]
@@ -258,6 +250,14 @@ class HexapodEnv(Env):
         lifted = foot_clearance[jp.maximum(leg, 0)] > self.config.lift_clearance
         bad = on_floor & (leg >= 0) & lifted
         return bad.sum(), (on_floor & ~self._geom_is_foot[other]).sum()
+
+    # -- internals ------------------------------------------------------------
+
+    def _active_terms(self):
+        return [name for name, scale in self.scales.items() if scale != 0.0]
+
+    def _distance(self, data):
+        return jp.linalg.norm(self._goal - data.qpos[:2])
 
     def _terms(self, prev, data, done, roll, pitch, dist):
         """Unscaled values of the active reward terms for one transition."""
