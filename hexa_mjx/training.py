@@ -382,6 +382,13 @@ def ppo_settings(cfg: TrainConfig) -> dict:
                 network_factory=network_factory(cfg))
 
 
+def evals_for(cfg: TrainConfig, remaining: int) -> int:
+    """brax's num_evals for `remaining` of the run's steps: at least the run's own evaluation density, so a
+    resumed run does not crowd all of its evaluations into the steps it has left (brax counts the
+    evaluation before training as one of them)."""
+    return 1 + max(1, math.ceil((cfg.num_evals - 1) * remaining / cfg.num_timesteps))
+
+
 def wrap_env_fn(cfg: TrainConfig):
     """brax's training wrappers, or ours that redraw the start noise every episode."""
     from hexa_mjx import wrappers
@@ -428,7 +435,7 @@ def train(cfg: TrainConfig) -> dict:
           f"{cfg.steps_per_update:,} steps per update -> {run_dir}", flush=True)
     ppo.train(environment=env, num_timesteps=remaining, **ppo_settings(cfg), seed=cfg.seed + start_step,
               max_devices_per_host=devices, wrap_env_fn=wrap_env_fn(cfg),
-              num_evals=cfg.num_evals, num_eval_envs=cfg.num_eval_envs, deterministic_eval=True,
+              num_evals=evals_for(cfg, remaining), num_eval_envs=cfg.num_eval_envs, deterministic_eval=True,
               progress_fn=on_progress, policy_params_fn=on_params, restore_params=restore)
     logger.close()
     total = time.time() - t0

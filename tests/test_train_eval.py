@@ -95,6 +95,13 @@ def test_runs_from_before_a_new_setting_resume(tmp_path):
         training.validate(dataclasses.replace(cfg, resume=True, start_yaw_noise=0.2))
 
 
+def test_resumed_run_keeps_its_evaluation_spacing():
+    cfg = training.TrainConfig(num_timesteps=2_000_000, num_evals=10)
+    assert training.evals_for(cfg, 2_000_000) == 10  # a fresh run: as asked
+    assert training.evals_for(cfg, 1_000_000) == 6  # half the run left: about half the evaluations
+    assert training.evals_for(cfg, 10_000) == 2  # the initial one and one at the end
+
+
 def test_checkpoint_restores_same_actions(tmp_path):
     cfg = training.TrainConfig(hidden=[32, 32])
     env = training.make_env_for(cfg)
