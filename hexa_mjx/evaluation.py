@@ -88,15 +88,22 @@ def episode_table(env, start_qpos, traj) -> dict:
     }
     # Steps before the goal radius is first reached; the rest of the episode is "after the goal".
     walking = alive * (np.minimum.accumulate(dist, axis=0) >= env.config.success_radius)
+    per_episode["steps_to_goal"] = walking.sum(0)
     if "reward/body_contact" in traj:
         # Crawling shows on the way to the goal: body contacts before the goal radius is first reached.
         per_episode["body_contact_before_goal"] = (traj["reward/body_contact"] * walking).sum(0)
-        per_episode["steps_to_goal"] = walking.sum(0)
+    phases = {"before_goal": walking, "after_goal": alive - walking}
     if "contacts" in traj:
         # Mean floor contact points per step, by link group, before and after first reaching the goal.
-        for phase, mask in (("before_goal", walking), ("after_goal", alive - walking)):
+        for phase, mask in phases.items():
             steps = np.maximum(mask.sum(0), 1)[:, None]
             per_episode[f"contacts_{phase}"] = (traj["contacts"] * mask[..., None]).sum(0) / steps
+
+    # Per-phase figures average over the episodes that have that phase: an episode that never
+    # reaches the goal has no steps to it and no steps after it (None when no episode has any).
+    has = {phase: mask.sum(0) > 0 for phase, mask in phases.items()}
+    reached = per_episode["success"] > 0
+
     summary = {
         "episodes": int(alive.shape[1]),
         "success_rate": float(per_episode["success"].mean()),
@@ -110,10 +117,12 @@ def episode_table(env, start_qpos, traj) -> dict:
         "nonfinite_rate": float(per_episode["nonfinite"].mean()),
         "mean_speed": float(per_episode["mean_speed"].mean()),
         "episode_length_mean": float(per_episode["length"].mean()),
-        **{f"{k}_mean": float(per_episode[k].mean()) for k in ("body_contact_before_goal", "steps_to_goal")
-           if k in per_episode},
-        **{f"contacts_{phase}": dict(zip(CONTACT_GROUPS, np.round(per_episode[f"contacts_{phase}"].mean(0), 3).tolist()))
-           for phase in ("before_goal", "after_goal") if f"contacts_{phase}" in per_episode},
+        "steps_to_goal_mean": float(per_episode["steps_to_goal"][reached].mean()) if reached.any() else None,
+        **({"body_contact_before_goal_mean": float(per_episode["body_contact_before_goal"].mean())}
+           if "body_contact_before_goal" in per_episode else {}),
+        **{f"contacts_{phase}": dict(zip(CONTACT_GROUPS, np.round(per_episode[f"contacts_{phase}"][has[phase]].mean(0),
+                                                                  3).tolist())) if has[phase].any() else None
+           for phase in phases if f"contacts_{phase}" in per_episode},
         # Per-episode sums of each scaled reward term, averaged: e.g. body_contact near 0 means no crawling.
         "reward_terms": {k[len("reward/"):]: float((traj[k] * alive).sum(0).mean())
                          for k in traj if k.startswith("reward/")},
@@ -130,12 +139,14 @@ def format_table(summary: dict) -> str:
             ("return, mean +- std", f"{summary['return_mean']:.1f} +- {summary['return_std']:.1f}"),
             ("fall rate", f"{summary['fall_rate']:.1%}"), ("mean speed", f"{summary['mean_speed']:.3f} m/s"),
             ("episode length, mean", f"{summary['episode_length_mean']:.0f} steps")]
+    steps = summary["steps_to_goal_mean"]
+    rows.append(("steps to the goal, mean of successes", "-" if steps is None else f"{steps:.0f}"))
     if "body_contact_before_goal_mean" in summary:
-        rows += [("steps before reaching the goal, mean", f"{summary['steps_to_goal_mean']:.0f}"),
-                 ("body contact before the goal, mean", f"{summary['body_contact_before_goal_mean']:.1f}")]
+        rows.append(("body contact before the goal, mean", f"{summary['body_contact_before_goal_mean']:.1f}"))
     for phase in ("before_goal", "after_goal"):
         if f"contacts_{phase}" in summary:
-            counts = ", ".join(f"{k} {v:.2f}" for k, v in summary[f"contacts_{phase}"].items())
+            counts = summary[f"contacts_{phase}"]
+            counts = "-" if counts is None else ", ".join(f"{k} {v:.2f}" for k, v in counts.items())
             rows.append((f"floor contacts per step, {phase.replace('_', ' ')}", counts))
     rows += [(f"  reward/{k}, per episode", f"{v:.1f}") for k, v in summary["reward_terms"].items()]
     width = max(len(k) for k, _ in rows)

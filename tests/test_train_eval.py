@@ -3,8 +3,10 @@
 import dataclasses
 import json
 import os
+import re
 import subprocess
 import sys
+from types import SimpleNamespace
 from pathlib import Path
 
 import imageio.v2 as imageio
@@ -140,13 +142,33 @@ def test_eval_writes_video_and_metrics(trained, cache_env, tmp_path):
     assert terms["body_contact"] <= 0 and terms["height"] < 0
     before = result["summary"]["contacts_before_goal"]
     assert list(before) == list(evaluation.CONTACT_GROUPS) and before["feet"] > 0  # it starts on its feet
-    assert sum(result["summary"]["contacts_after_goal"].values()) == 0  # 20 steps never reach the goal
+    # 20 steps never reach the goal: no episode has an "after the goal" phase.
+    assert result["summary"]["contacts_after_goal"] is None and result["summary"]["steps_to_goal_mean"] is None
     assert "floor contacts per step, before goal" in proc.stdout
     video = out / "episode_0.mp4"
     assert video.stat().st_size > 1000
     frames = np.array([f for f in imageio.get_reader(video)])
     assert len(frames) == 21  # start frame + 20 control steps
     assert np.abs(frames[0].astype(float) - frames[-1].astype(float)).mean() > 1.0  # the picture changes
+
+
+def test_episode_table_phases_average_over_episodes_that_have_them():
+    """Two 4-step episodes: the first reaches the goal at its second step, the second never does."""
+    env = SimpleNamespace(config=SimpleNamespace(success_radius=0.5), dt=0.1)
+    T, N = 4, 2
+    contacts = np.zeros((T, N, len(evaluation.CONTACT_GROUPS)))
+    contacts[:, 0, 3] = [1, 2, 2, 2]  # feet of episode 0: 1 before the goal, 2 after
+    contacts[:, 1, 2] = [3, 3, 3, 3]  # shins of episode 1, which never gets there
+    traj = {"alive": np.ones((T, N)), "distance": np.array([[1.0, 1.0], [0.4, 0.9], [0.3, 0.8], [0.6, 0.7]]),
+            "qpos": np.zeros((T, N, 7)), "goal_bonus": np.zeros((T, N)), "reward": np.ones((T, N)),
+            "fell": np.zeros((T, N)), "nonfinite": np.zeros((T, N)), "contacts": contacts,
+            "reward/body_contact": -contacts[..., 2]}
+    summary = evaluation.episode_table(env, np.zeros((N, 7)), traj)["summary"]
+    assert summary["success_rate"] == 0.5 and summary["steps_to_goal_mean"] == 1.0
+    assert summary["contacts_after_goal"] == {"torso": 0.0, "hip and knee links": 0.0, "shins": 0.0, "feet": 2.0}
+    assert summary["contacts_before_goal"] == {"torso": 0.0, "hip and knee links": 0.0, "shins": 1.5, "feet": 0.5}
+    assert summary["body_contact_before_goal_mean"] == -6.0  # (0 + -12) / 2
+    assert re.search(r"steps to the goal, mean of successes +1\n", evaluation.format_table(summary))
 
 
 def test_contact_groups(env):
