@@ -7,7 +7,8 @@
 
 Runs go to <out>/<study>/<condition>-s<seed>/, each the folder train.py writes. A finished run
 (latest checkpoint at or past its budget) is skipped, an interrupted one resumed, so a study can
-be re-run until it is complete. Runs execute one after another in this process, each split over
+be re-run until it is complete. A run whose settings equal a finished run of another study in the
+same --out folder is linked to it instead of trained again. Runs execute one after another in this process, each split over
 one XLA CPU device per core (brax's pmap), so one run keeps every core busy: running seeds side
 by side would not finish sooner on a CPU. Each run pays its own compile (about 1.5 min here):
 brax's PPO traces afresh per call.
@@ -20,6 +21,7 @@ import csv
 import dataclasses
 import json
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -74,16 +76,45 @@ def status(run: Run) -> str:
     return "partial" if (run_dir / "config.json").is_file() else "new"
 
 
+def finished_twin(run: Run) -> Path | None:
+    """A finished run of any study in the same output folder with exactly this run's settings
+    (the grids overlap: the main study's goal_directed seeds, the ablation's "full" and the lr
+    study's 3e-4 are the same training at the same budget, and training is deterministic)."""
+    run_dir = Path(run.config.run_dir)
+    same = dataclasses.replace(run.config, run_dir="", resume=False)
+    for config in sorted(run_dir.parent.parent.glob("*/*/config.json")):
+        other = config.parent
+        if other == run_dir or other.is_symlink():
+            continue
+        saved = dataclasses.replace(training.load_config(other), run_dir="", resume=False)
+        done = training.list_checkpoints(other)
+        if saved == same and done and done[-1][0] >= run.config.num_timesteps:
+            return other
+    return None
+
+
 def run_study(runs: list[Run], train_fn=training.train) -> dict[str, int]:
-    """Train every run that is not finished; returns how many were skipped, resumed and started."""
-    counts = {"done": 0, "partial": 0, "new": 0}
+    """Train every run that is not finished; returns how many were skipped, reused from an
+    identical finished run of another study (linked, not trained again), resumed and started."""
+    counts = {"done": 0, "reused": 0, "partial": 0, "new": 0}
     for run in runs:
         state = status(run)
+        run_dir = Path(run.config.run_dir)
+        if run_dir.is_symlink() and state != "done":
+            # A link to another study's run that now has a larger budget: never train into that run.
+            run_dir.unlink()
+            state = "new"
+        twin = finished_twin(run) if state == "new" else None
+        if twin is not None:
+            state = "reused"
+            run_dir.parent.mkdir(parents=True, exist_ok=True)
+            run_dir.symlink_to(os.path.relpath(twin, run_dir.parent), target_is_directory=True)
+            print(f"reuse {run_dir}: links to {twin}, a finished run with the same settings")
         counts[state] += 1
         if state == "done":
             print(f"skip {run.config.run_dir}: finished")
-            continue
-        train_fn(dataclasses.replace(run.config, resume=state == "partial"))
+        elif state != "reused":
+            train_fn(dataclasses.replace(run.config, resume=state == "partial"))
     return counts
 
 

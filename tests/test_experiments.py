@@ -1,6 +1,7 @@
 """Study grids, skip/resume, and aggregation on synthetic metrics (no training)."""
 
 import csv
+import dataclasses
 import json
 
 import matplotlib.image as mpimg
@@ -33,8 +34,35 @@ def test_finished_runs_are_skipped_and_interrupted_ones_resumed(tmp_path):
     assert [experiments.status(r) for r in runs] == ["done", "partial", "new"]
     calls = []
     counts = experiments.run_study(runs, train_fn=calls.append)
-    assert counts == {"done": 1, "partial": 1, "new": 1}
+    assert counts == {"done": 1, "reused": 0, "partial": 1, "new": 1}
     assert [(c.run_dir, c.resume) for c in calls] == [(partial.config.run_dir, True), (new.config.run_dir, False)]
+
+
+def test_a_run_identical_to_a_finished_one_is_linked_not_trained(tmp_path):
+    main = {(r.condition, r.seed): r for r in experiments.grid("main", tmp_path, timesteps=1000, seeds=1)}
+    finished = main[("goal_directed", 0)].config
+    (tmp_path / finished.run_dir / "checkpoints" / f"{1024:012d}").mkdir(parents=True)
+    (tmp_path / finished.run_dir / "config.json").write_text(json.dumps(dataclasses.asdict(finished)))
+    (tmp_path / finished.run_dir / "metrics.jsonl").write_text(json.dumps({"step": 1024}) + "\n")
+    lr = experiments.grid("lr", tmp_path, timesteps=1000, seeds=1)
+    ablation = experiments.grid("ablation", tmp_path, timesteps=1000, seeds=1)
+    calls = []
+    assert experiments.run_study(lr, train_fn=calls.append) == {"done": 0, "reused": 1, "partial": 0, "new": 2}
+    assert experiments.run_study(ablation, train_fn=calls.append)["reused"] == 1
+    # lr 3e-4 and the ablation's "full" are the main study's goal-directed run: linked, not trained.
+    assert sorted(c.run_dir for c in calls) == sorted(r.config.run_dir for r in lr + ablation
+                                                      if r.condition not in ("lr_0.0003", "full"))
+    for linked in (tmp_path / "lr" / "lr_0.0003-s0", tmp_path / "ablation" / "full-s0"):
+        assert linked.is_symlink() and linked.resolve() == (tmp_path / finished.run_dir).resolve()
+        assert (linked / "metrics.jsonl").is_file()
+    assert experiments.run_study(lr, train_fn=calls.append)["done"] == 1  # a linked run counts as finished
+    # A larger budget is a different run: the link goes, and the run is trained in its own folder.
+    longer = experiments.grid("lr", tmp_path, timesteps=2000, seeds=1)
+    assert all(experiments.finished_twin(r) is None for r in longer)
+    calls.clear()
+    assert experiments.run_study(longer, train_fn=calls.append)["new"] == 3
+    assert not (tmp_path / "lr" / "lr_0.0003-s0").exists() and len(calls) == 3
+    assert (tmp_path / finished.run_dir / "config.json").is_file()  # the main study's run is untouched
 
 
 def write_run(root, study, condition, seed, finals):
