@@ -383,9 +383,9 @@ def ppo_settings(cfg: TrainConfig) -> dict:
 
 
 def evals_for(cfg: TrainConfig, remaining: int) -> int:
-    """brax's num_evals for `remaining` of the run's steps: at least the run's own evaluation density, so a
-    resumed run does not crowd all of its evaluations into the steps it has left (brax counts the
-    evaluation before training as one of them)."""
+    """brax's num_evals for `remaining` of the run's steps, at least as dense as the run's own
+    spacing: a resumed run must not crowd all of its evaluations into the steps it has left (brax
+    counts the evaluation before training as one of them)."""
     return 1 + max(1, math.ceil((cfg.num_evals - 1) * remaining / cfg.num_timesteps))
 
 
