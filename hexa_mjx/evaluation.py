@@ -102,7 +102,7 @@ def episode_table(env, start_qpos, traj) -> dict:
     # Per-phase figures average over the episodes that have that phase: an episode that never
     # reaches the goal has no steps to it and no steps after it (None when no episode has any).
     has = {phase: mask.sum(0) > 0 for phase, mask in phases.items()}
-    reached = per_episode["success"] > 0
+    reached = has["after_goal"]  # the step that first enters the goal radius is already "after"
 
     summary = {
         "episodes": int(alive.shape[1]),

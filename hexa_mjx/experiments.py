@@ -8,9 +8,9 @@
 Runs go to <out>/<study>/<condition>-s<seed>/, each the folder train.py writes. A finished run
 (latest checkpoint at or past its budget) is skipped, an interrupted one resumed, so a study can
 be re-run until it is complete. A run whose settings equal a finished run of another study in the
-same --out folder is linked to it instead of trained again. Runs execute one after another in this process, each split over
-one XLA CPU device per core (brax's pmap), so one run keeps every core busy: running seeds side
-by side would not finish sooner on a CPU. Each run pays its own compile (about 1.5 min here):
+same --out folder is linked to it instead of trained again. Runs execute one after another in
+this process, each split over one XLA CPU device per core (brax's pmap), so one run keeps every
+core busy: running seeds side by side would not finish sooner on a CPU. Each run pays its own compile (about 1.5 min here):
 brax's PPO traces afresh per call.
 """
 
@@ -67,11 +67,16 @@ def grid(study: str, out: Path, timesteps: int = 2_000_000, seeds: int | None = 
     return runs
 
 
+def _finished(run_dir: Path, budget: int) -> bool:
+    """Whether the run in `run_dir` has a checkpoint at or past `budget` steps."""
+    found = training.list_checkpoints(run_dir)
+    return bool(found) and found[-1][0] >= budget
+
+
 def status(run: Run) -> str:
     """'done', 'partial' (resumable) or 'new'."""
     run_dir = Path(run.config.run_dir)
-    found = training.list_checkpoints(run_dir)
-    if found and found[-1][0] >= run.config.num_timesteps:
+    if _finished(run_dir, run.config.num_timesteps):
         return "done"
     return "partial" if (run_dir / "config.json").is_file() else "new"
 
@@ -87,8 +92,7 @@ def finished_twin(run: Run) -> Path | None:
         if other == run_dir or other.is_symlink():
             continue
         saved = dataclasses.replace(training.load_config(other), run_dir="", resume=False)
-        done = training.list_checkpoints(other)
-        if saved == same and done and done[-1][0] >= run.config.num_timesteps:
+        if saved == same and _finished(other, run.config.num_timesteps):
             return other
     return None
 
