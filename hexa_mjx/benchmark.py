@@ -1,14 +1,15 @@
 """Environment speed: MJX batched env/physics steps per second beside MuJoCo C.
 
     python -m hexa_mjx.benchmark [--batches 64 256 1024] [--steps 100] [--repeats 3] [--compare_solver 4 8]
-                                 [--profile] [--train]
+                                 [--profile] [--train] [--max_contact_points N] [--compare_contacts N ...]
 
 Prints compile time, then for each batch size the median over repeats of env
 steps/s and physics steps/s (env steps x substeps) under random actions, then
 MuJoCo C's single-thread physics steps/s on the same model (mujoco.rollout) and
 the MJX/C ratio. Everything is measured in one run, side by side. --profile splits
 one PPO update into its parts; --train times end-to-end PPO beside the environment
-alone, on one device and on one CPU device per core.
+alone, on one device and on one CPU device per core. --compare_contacts times
+MJX contact caps (`EnvConfig.max_contact_points`) in turns with the model's setting.
 """
 
 from __future__ import annotations
@@ -56,6 +57,22 @@ def mjx_speed(env, batch: int, steps: int, repeats: int) -> dict:
     env_rate = statistics.median(rates)
     return {"batch": batch, "compile_s": compile_s, "env_steps_per_s": env_rate,
             "physics_steps_per_s": env_rate * env.n_substeps}
+
+
+def compare_speed(envs: dict, batch: int, steps: int, repeats: int) -> dict:
+    """Median env steps/s of each named env at one batch size, timed in turns (one rollout of each
+    per round) so that a noisy, shared machine slows them alike."""
+    runs, rates = {}, {name: [] for name in envs}
+    for name, env in envs.items():
+        run = _rollout_fn(jax.vmap(env.step), env.action_size, steps)
+        state = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(0), batch))
+        runs[name] = (run, jax.block_until_ready(run(state, jax.random.PRNGKey(1))))
+    for r in range(repeats):
+        for name, (run, state) in runs.items():
+            t0 = time.perf_counter()
+            runs[name] = (run, jax.block_until_ready(run(state, jax.random.PRNGKey(2 + r))))
+            rates[name].append(batch * steps / (time.perf_counter() - t0))
+    return {name: statistics.median(r) for name, r in rates.items()}
 
 
 def pmap_speed(env, batch: int, steps: int, repeats: int, devices: int) -> float:
@@ -117,14 +134,14 @@ def solver_error(env, steps: int) -> tuple[float, float]:
     return float(np.abs(fast[:3] - ref[:3]).max()), float(np.abs(fast[7:] - ref[7:]).max())
 
 
-def train_speed(num_envs: int = 256, updates: int = 4, devices: int = 1) -> dict:
+def train_speed(num_envs: int = 256, updates: int = 4, devices: int = 1, **overrides) -> dict:
     """End-to-end PPO env steps/s (train.py's settings, no evaluations) and compile time on `devices`.
     Three training epochs of `updates` updates: the first compiles, the last is timed."""
     from brax.training.agents.ppo import train as ppo
 
     from hexa_mjx import training
 
-    cfg = training.TrainConfig(num_envs=num_envs)
+    cfg = training.TrainConfig(num_envs=num_envs, **overrides)
     env = training.make_env_for(cfg)
     marks = [(0, time.perf_counter())]
     ppo.train(environment=env, num_timesteps=3 * updates * cfg.steps_per_update, **training.ppo_settings(cfg),
@@ -272,14 +289,20 @@ def main(argv=None) -> None:
                              "policy inference and SGD")
     parser.add_argument("--compare_solver", type=int, nargs=2, metavar=("ITERATIONS", "LS_ITERATIONS"),
                         help="also time this solver setting at the largest batch, beside the model's own")
+    parser.add_argument("--max_contact_points", type=int, default=0,
+                        help="contact points MJX keeps per step, for every measurement (0: all the model's slots)")
+    parser.add_argument("--compare_contacts", type=int, nargs="+", metavar="N",
+                        help="also time these max_contact_points at the largest batch, in turns with the setting above")
     args = parser.parse_args(argv)
 
     from hexa_mjx import training
 
     training.prepare_jax()  # as train.py does; single-device timings use one of the CPU devices
-    env = hexa_mjx.make_env(ctrl_hz=args.ctrl_hz)
+    cap = {"max_contact_points": args.max_contact_points}
+    env = hexa_mjx.make_env(ctrl_hz=args.ctrl_hz, **cap)
     m = env.mj_model
     print(f"model: {env.config.model_path}  nv={m.nv} nu={m.nu} ngeom={m.ngeom} "
+          f"contact slots={env._data0._impl.contact.dist.shape[0]} "
           f"solver iterations={m.opt.iterations} ls_iterations={m.opt.ls_iterations} "
           f"substeps/env step={env.n_substeps}  jax {jax.__version__} on {jax.devices()[0].platform}")
     c_rate = mujoco_c_speed(m, steps=4000, repeats=args.repeats)
@@ -291,12 +314,21 @@ def main(argv=None) -> None:
     print(f"MuJoCo C single-thread (mujoco.rollout): {c_rate:.0f} physics steps/s")
     if args.compare_solver:
         it, ls = args.compare_solver
-        other = hexa_mjx.make_env(ctrl_hz=args.ctrl_hz, solver_iterations=it, ls_iterations=ls)
+        other = hexa_mjx.make_env(ctrl_hz=args.ctrl_hz, solver_iterations=it, ls_iterations=ls, **cap)
         r = mjx_speed(other, args.batches[-1], args.steps, args.repeats)
         print(f"solver iterations={it} ls_iterations={ls}: {r['physics_steps_per_s']:.0f} physics steps/s "
               f"at {args.batches[-1]} envs ({r['physics_steps_per_s'] / c_rate:.0%} of MuJoCo C 1-thread)")
+    if args.compare_contacts:
+        envs = {n: hexa_mjx.make_env(ctrl_hz=args.ctrl_hz, max_contact_points=n)
+                for n in [args.max_contact_points, *args.compare_contacts]}
+        rates = compare_speed(envs, args.batches[-1], args.steps, args.repeats)
+        base = rates[args.max_contact_points]
+        print(f"contact points kept, env steps/s at {args.batches[-1]} envs (timed in turns, median of {args.repeats}):")
+        for n, rate in rates.items():
+            slots = envs[n]._data0._impl.contact.dist.shape[0]
+            print(f"  max_contact_points={n:<3} ({slots} slots) {rate:8.0f}  {rate / base:5.2f}x")
     if args.profile:
-        p = training_profile(args.batches[-1], args.repeats)
+        p = training_profile(args.batches[-1], args.repeats, **cap)
         parts = {"physics without contacts": p["env_without_contacts"], "contacts": p["env"] - p["env_without_contacts"],
                  "policy inference": p["acting"] - p["env"], "SGD (epochs x minibatches)": p["sgd"]}
         total = p["acting"] + p["sgd"]
@@ -313,7 +345,7 @@ def main(argv=None) -> None:
         if cores > 1:
             env_rates[cores] = pmap_speed(env, args.batches[-1], args.steps, args.repeats, cores)
         for devices, env_rate in env_rates.items():
-            r = train_speed(args.batches[-1], devices=devices)
+            r = train_speed(args.batches[-1], devices=devices, **cap)
             print(f"PPO training at {args.batches[-1]} envs on {devices} device(s): {r['train_steps_per_s']:.0f} "
                   f"env steps/s after {r['compile_s']:.0f} s of compiling; environment alone {env_rate:.0f} env "
                   f"steps/s: the learner adds {env_rate / r['train_steps_per_s'] - 1:.0%} to the environment time")

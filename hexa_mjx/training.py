@@ -76,6 +76,8 @@ class TrainConfig:
         "help": "rad, uniform noise on each joint's start angle, drawn per episode (0: the report's fixed start)"})
     start_yaw_noise: float = dataclasses.field(default=0.0, metadata={
         "help": "rad, uniform noise on the start heading, drawn per episode"})
+    max_contact_points: int = dataclasses.field(default=0, metadata={
+        "help": "MJX keeps only this many deepest robot-floor contacts per step (0: all 40 slots)"})
     num_eval_envs: int = dataclasses.field(default=32, metadata={
         "help": "episodes per evaluation (deterministic policy)"})
     cpu_devices: int = dataclasses.field(default=0, metadata={
@@ -297,7 +299,8 @@ def load_config(run_dir: Path) -> TrainConfig:
 def make_env_for(cfg: TrainConfig, **overrides):
     """The run's environment; keyword overrides set `EnvConfig` fields (eval's start noise)."""
     settings = dict(ablate=tuple(cfg.ablate), ctrl_hz=cfg.ctrl_hz, episode_length=cfg.episode_length,
-                    start_joint_noise=cfg.start_joint_noise, start_yaw_noise=cfg.start_yaw_noise)
+                    start_joint_noise=cfg.start_joint_noise, start_yaw_noise=cfg.start_yaw_noise,
+                    max_contact_points=cfg.max_contact_points)
     return hexa_mjx.make_env(cfg.reward, **{**settings, **overrides})
 
 

@@ -143,6 +143,44 @@ def test_mjx_matches_mujoco_c(env, step, state0):
     np.testing.assert_allclose(got[:, 7:], expected[:, 7:], atol=0.1)  # rad
 
 
+CAP = 16  # contact points kept by the capped model below (the model has 40 slots)
+
+
+@pytest.fixture(scope="module")
+def capped():
+    return hexa_mjx.make_env(max_contact_points=CAP)
+
+
+def test_contact_cap_keeps_the_deepest_contacts(env, capped):
+    # Torso lowered to 7 cm: the feet and 12 leg-link points press into the floor, more than CAP.
+    qpos = np.array(env.mj_model.key_qpos[0])
+    qpos[2] = 0.07
+    def contacts(e):
+        data = jax.jit(lambda q: mjx.forward(e.mjx_model, e._data0.replace(qpos=q)))(jp.asarray(qpos, jp.float32))
+        return np.sort(np.asarray(data._impl.contact.dist)), [int(x) for x in e.contact_counts(data)]
+    all_dist, all_counts = contacts(env)
+    cap_dist, cap_counts = contacts(capped)
+    assert (all_dist < 0).sum() > CAP and len(cap_dist) == CAP
+    np.testing.assert_allclose(cap_dist, all_dist[:CAP], atol=1e-6)  # the CAP deepest, the rest dropped
+    assert cap_counts[1] == all_counts[1] - ((all_dist < 0).sum() - CAP)  # the shallow ones are non-foot
+
+
+def test_contact_cap_leaves_walking_physics_unchanged(env, step, state0, capped):
+    # A gait touches the floor with a few feet at a time, far below CAP: the capped solve must match
+    # the full one up to float rounding, and so must the contact reward terms.
+    cap_step, cap_state = jax.jit(capped.step), jax.jit(capped.reset)(jax.random.PRNGKey(0))
+    state, touching = state0, []
+    for a in gait_actions(15, env.dt):
+        a = jp.asarray(a, jp.float32)
+        state, cap_state = step(state, a), cap_step(cap_state, a)
+        np.testing.assert_allclose(cap_state.pipeline_state.qpos, state.pipeline_state.qpos, atol=1e-4)
+        for term in ("reward/body_contact", "reward/contact_quality", "goal_bonus"):
+            assert float(cap_state.metrics[term]) == float(state.metrics[term])
+        touching.append(int(env.floor_contact_geoms(state.pipeline_state)[0].sum()))
+        assert int(capped.floor_contact_geoms(cap_state.pipeline_state)[0].sum()) == touching[-1]
+    assert 0 < max(touching) < CAP
+
+
 def test_flipped_robot_terminates(env, step, state0):
     ps = state0.pipeline_state
     flipped = state0.replace(pipeline_state=ps.replace(qpos=ps.qpos.at[2].set(0.3).at[3:7].set(FLIPPED)))
@@ -234,6 +272,8 @@ def test_bad_settings_give_clear_errors():
         hexa_mjx.make_env(ctrl_hz=50)
     with pytest.raises(ValueError, match="start_yaw_noise is a range in radians from 0 to pi, got -0.1"):
         hexa_mjx.make_env(start_yaw_noise=-0.1)
+    with pytest.raises(ValueError, match="max_contact_points must be 0 .every contact slot. or positive, got -2"):
+        hexa_mjx.make_env(max_contact_points=-2)
     with pytest.raises(ValueError, match="unknown ablation"):
         hexa_mjx.make_env(ablate="legs")
     assert hexa_mjx.make_env(ctrl_hz=30).n_substeps == 8
