@@ -98,6 +98,11 @@ def episode_table(env, start_qpos, traj) -> dict:
         for phase, mask in phases.items():
             steps = np.maximum(mask.sum(0), 1)[:, None]
             per_episode[f"contacts_{phase}"] = (traj["contacts"] * mask[..., None]).sum(0) / steps
+        points = traj["contacts"].sum(-1) * alive  # floor contact points at once, every group
+        per_episode["contact_points_max"] = points.max(0)
+        cap = env.config.max_contact_points
+        # Steps at which the physics had as many contact points as it keeps (more may have been dropped).
+        per_episode["steps_at_contact_cap"] = ((points >= cap) * alive).sum(0) if cap else np.zeros_like(length)
 
     # Per-phase figures average over the episodes that have that phase: an episode that never
     # reaches the goal has no steps to it and no steps after it (None when no episode has any).
@@ -123,6 +128,10 @@ def episode_table(env, start_qpos, traj) -> dict:
         **{f"contacts_{phase}": dict(zip(CONTACT_GROUPS, np.round(per_episode[f"contacts_{phase}"][has[phase]].mean(0),
                                                                   3).tolist())) if has[phase].any() else None
            for phase in phases if f"contacts_{phase}" in per_episode},
+        **({"contact_points_max": int(per_episode["contact_points_max"].max()),
+            "contact_cap": env.config.max_contact_points,
+            "steps_at_contact_cap": int(per_episode["steps_at_contact_cap"].sum()),
+            "steps": int(length.sum())} if "contacts" in traj else {}),
         # Per-episode sums of each scaled reward term, averaged: e.g. body_contact near 0 means no crawling.
         "reward_terms": {k[len("reward/"):]: float((traj[k] * alive).sum(0).mean())
                          for k in traj if k.startswith("reward/")},
@@ -148,6 +157,11 @@ def format_table(summary: dict) -> str:
             counts = summary[f"contacts_{phase}"]
             counts = "-" if counts is None else ", ".join(f"{k} {v:.2f}" for k, v in counts.items())
             rows.append((f"floor contacts per step, {phase.replace('_', ' ')}", counts))
+    if "contact_points_max" in summary:
+        cap = summary["contact_cap"]
+        kept = (f"physics keeps {cap}; at that cap in {summary['steps_at_contact_cap']:,} of {summary['steps']:,} "
+                "steps" if cap else "physics keeps every contact")
+        rows.append(("floor contact points at once, most", f"{summary['contact_points_max']} ({kept})"))
     rows += [(f"  reward/{k}, per episode", f"{v:.1f}") for k, v in summary["reward_terms"].items()]
     width = max(len(k) for k, _ in rows)
     return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
@@ -187,15 +201,16 @@ def render_video(env, qpos_frames: np.ndarray, path: Path, width=640, height=480
 
 
 def evaluate(ckpt: str | Path, episodes: int = 128, videos: int = 1, out: str | Path | None = None,
-             seed: int = 0, video: bool = True, **start_noise) -> dict:
+             seed: int = 0, video: bool = True, **env_overrides) -> dict:
     """Load a checkpoint, run `episodes` deterministic episodes, write metrics JSON and videos.
 
-    `start_joint_noise` / `start_yaw_noise` keywords replace the run's start noise (rad); with
-    none, every episode starts from the same state and the episodes differ only by numerics.
+    `start_joint_noise` / `start_yaw_noise` / `max_contact_points` keywords replace the run's own
+    setting (None keeps it). Without start noise every episode starts from the same state and the
+    episodes differ only by numerics.
     """
     run_dir, ckpt_dir = training.resolve_checkpoint(Path(ckpt))
     cfg = training.load_config(run_dir)
-    env = training.make_env_for(cfg, **{k: v for k, v in start_noise.items() if v is not None})
+    env = training.make_env_for(cfg, **{k: v for k, v in env_overrides.items() if v is not None})
     step, params = training.load_checkpoint(ckpt_dir, training.init_params(cfg, env))
     policy = training.make_inference(cfg, env, params, deterministic=True)
     start, traj = rollout(env, policy, episodes, seed)
@@ -203,7 +218,8 @@ def evaluate(ckpt: str | Path, episodes: int = 128, videos: int = 1, out: str | 
     out = Path(out) if out else run_dir / "eval"
     out.mkdir(parents=True, exist_ok=True)
     run = {"reward": cfg.reward, "ablate": cfg.ablate, "seed": cfg.seed,
-           "start_joint_noise": env.config.start_joint_noise, "start_yaw_noise": env.config.start_yaw_noise}
+           "start_joint_noise": env.config.start_joint_noise, "start_yaw_noise": env.config.start_yaw_noise,
+           "max_contact_points": env.config.max_contact_points}
     result = {"checkpoint": str(ckpt_dir), "step": step, "config": run, **table, "videos": []}
     if video:
         for i in range(min(videos, episodes)):

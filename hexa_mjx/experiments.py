@@ -1,6 +1,6 @@
 """The report's studies as grids of train.py runs, and their aggregation into figures and tables.
 
-    python -m hexa_mjx.experiments main       [--timesteps N] [--seeds K] [--out DIR]
+    python -m hexa_mjx.experiments main       [--timesteps N] [--seeds K] [--out DIR] [--max_contact_points N]
     python -m hexa_mjx.experiments ablation   [...]
     python -m hexa_mjx.experiments lr         [...]
     python -m hexa_mjx.experiments aggregate  --out DIR      # figures and tables from existing runs
@@ -44,8 +44,8 @@ class Run:
 
 
 def grid(study: str, out: Path, timesteps: int = 2_000_000, seeds: int | None = None,
-         num_envs: int = 256) -> list[Run]:
-    """The runs of one study (report sections 4.2 to 4.4)."""
+         num_envs: int = 256, **common) -> list[Run]:
+    """The runs of one study (report sections 4.2 to 4.4); `common` sets other TrainConfig fields of every run."""
     if study not in STUDIES:
         raise ValueError(f"unknown study {study!r}; choose one of {STUDIES}")
     seeds = DEFAULT_SEEDS[study] if seeds is None else seeds
@@ -62,7 +62,7 @@ def grid(study: str, out: Path, timesteps: int = 2_000_000, seeds: int | None = 
         for seed in range(seeds):
             run_dir = Path(out) / study / f"{condition}-s{seed}"
             cfg = training.TrainConfig(num_envs=num_envs, num_timesteps=timesteps, seed=seed,
-                                       run_dir=str(run_dir), **settings)
+                                       run_dir=str(run_dir), **common, **settings)
             runs.append(Run(study, condition, seed, cfg))
     return runs
 
@@ -251,11 +251,14 @@ def main(argv=None) -> int:
     parser.add_argument("--seeds", type=int, default=None, help="seeds per condition (default: main 5, ablation 1, lr 2)")
     parser.add_argument("--num_envs", type=int, default=256, help="environments per run (default: 256)")
     parser.add_argument("--out", type=Path, default=Path("experiments"), help="output folder (default: experiments)")
+    parser.add_argument("--max_contact_points", type=int, default=0,
+                        help="MJX keeps only this many deepest robot-floor contact points per step (default 0: all)")
     args = parser.parse_args(argv)
     try:
         if args.study != "aggregate":
             training.prepare_jax()  # before anything starts JAX: one device per core
-            runs = grid(args.study, args.out, args.timesteps, args.seeds, args.num_envs)
+            runs = grid(args.study, args.out, args.timesteps, args.seeds, args.num_envs,
+                        max_contact_points=args.max_contact_points)
             for run in runs:  # every run's settings are checked before the first one compiles
                 training.validate(dataclasses.replace(run.config, resume=status(run) != "new"))
             print(run_study(runs))

@@ -20,6 +20,9 @@ def test_grids_match_the_report(tmp_path):
     assert sorted({r.config.lr for r in lr}) == [1e-4, 3e-4, 1e-3] and len(lr) == 9
     assert all(r.config.num_timesteps == 1000 for r in lr)
     assert lr[0].config.run_dir == str(tmp_path / "lr" / "lr_0.0001-s0")
+    assert {r.config.max_contact_points for r in main} == {0}  # every contact slot, as the report's physics
+    capped = experiments.grid("ablation", tmp_path, max_contact_points=16)
+    assert {r.config.max_contact_points for r in capped} == {16}
     with pytest.raises(ValueError, match="unknown study"):
         experiments.grid("speed", tmp_path)
 

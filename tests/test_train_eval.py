@@ -145,6 +145,8 @@ def test_eval_writes_video_and_metrics(trained, cache_env, tmp_path):
     # 20 steps never reach the goal: no episode has an "after the goal" phase.
     assert result["summary"]["contacts_after_goal"] is None and result["summary"]["steps_to_goal_mean"] is None
     assert "floor contacts per step, before goal" in proc.stdout
+    assert result["config"]["max_contact_points"] == 0 and "floor contact points at once, most" in proc.stdout
+    assert 0 < result["summary"]["contact_points_max"] <= 40
     video = out / "episode_0.mp4"
     assert video.stat().st_size > 1000
     frames = np.array([f for f in imageio.get_reader(video)])
@@ -154,7 +156,7 @@ def test_eval_writes_video_and_metrics(trained, cache_env, tmp_path):
 
 def test_episode_table_phases_average_over_episodes_that_have_them():
     """Two 4-step episodes: the first reaches the goal at its second step, the second never does."""
-    env = SimpleNamespace(config=SimpleNamespace(success_radius=0.5), dt=0.1)
+    env = SimpleNamespace(config=SimpleNamespace(success_radius=0.5, max_contact_points=3), dt=0.1)
     T, N = 4, 2
     contacts = np.zeros((T, N, len(evaluation.CONTACT_GROUPS)))
     contacts[:, 0, 3] = [1, 2, 2, 2]  # feet of episode 0: 1 before the goal, 2 after
@@ -168,6 +170,10 @@ def test_episode_table_phases_average_over_episodes_that_have_them():
     assert summary["contacts_after_goal"] == {"torso": 0.0, "hip and knee links": 0.0, "shins": 0.0, "feet": 2.0}
     assert summary["contacts_before_goal"] == {"torso": 0.0, "hip and knee links": 0.0, "shins": 1.5, "feet": 0.5}
     assert summary["body_contact_before_goal_mean"] == -6.0  # (0 + -12) / 2
+    # Episode 1 has 3 points on the floor at every step: as many as this physics keeps.
+    assert summary["contact_points_max"] == 3 and summary["steps_at_contact_cap"] == 4 and summary["steps"] == 8
+    assert re.search(r"floor contact points at once, most +3 \(physics keeps 3; at that cap in 4 of 8 steps\)",
+                     evaluation.format_table(summary))
     assert re.search(r"steps to the goal, mean of successes +1\n", evaluation.format_table(summary))
 
 
