@@ -277,3 +277,14 @@ def test_bad_settings_give_clear_errors():
     with pytest.raises(ValueError, match="unknown ablation"):
         hexa_mjx.make_env(ablate="legs")
     assert hexa_mjx.make_env(ctrl_hz=30).n_substeps == 8
+
+
+def test_contact_cap_replaces_the_files_own(tmp_path):
+    from hexa_mjx.env import _load_model
+
+    path = tmp_path / "capped.xml"  # the model references no mesh files, so a copy loads anywhere
+    path.write_text(robot.MODEL_XML.read_text().replace(
+        "</mujoco>", '<custom><numeric name="max_contact_points" data="7"/></custom></mujoco>'))
+    assert _load_model(path, 0).nnumeric == 0  # 0 means every slot, whatever the file says
+    capped = _load_model(path, 12)
+    assert capped.nnumeric == 1 and capped.numeric("max_contact_points").data.tolist() == [12.0]
