@@ -43,36 +43,27 @@ def _rollout_fn(batched_step, action_size: int, steps: int):
 
 def mjx_speed(env, batch: int, steps: int, repeats: int) -> dict:
     """Compile time and median env steps/s for one batch size."""
-    reset = jax.jit(jax.vmap(env.reset))
-    run = _rollout_fn(jax.vmap(env.step), env.action_size, steps)
-    state = reset(jax.random.split(jax.random.PRNGKey(0), batch))
-    t0 = time.perf_counter()
-    state = jax.block_until_ready(run(state, jax.random.PRNGKey(1)))
-    compile_s = time.perf_counter() - t0
-    rates = []
-    for r in range(repeats):
-        t0 = time.perf_counter()
-        state = jax.block_until_ready(run(state, jax.random.PRNGKey(2 + r)))
-        rates.append(batch * steps / (time.perf_counter() - t0))
-    env_rate = statistics.median(rates)
+    compile_s, env_rate = compare_speed({"env": env}, batch, steps, repeats)["env"]
     return {"batch": batch, "compile_s": compile_s, "env_steps_per_s": env_rate,
             "physics_steps_per_s": env_rate * env.n_substeps}
 
 
 def compare_speed(envs: dict, batch: int, steps: int, repeats: int) -> dict:
-    """Median env steps/s of each named env at one batch size, timed in turns (one rollout of each
-    per round) so that a noisy, shared machine slows them alike."""
-    runs, rates = {}, {name: [] for name in envs}
+    """(compile s, median env steps/s) of each named env at one batch size, timed in turns (one
+    rollout of each per round) so that a noisy, shared machine slows them alike."""
+    runs, compile_s, rates = {}, {}, {name: [] for name in envs}
     for name, env in envs.items():
         run = _rollout_fn(jax.vmap(env.step), env.action_size, steps)
         state = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(0), batch))
+        t0 = time.perf_counter()
         runs[name] = (run, jax.block_until_ready(run(state, jax.random.PRNGKey(1))))
+        compile_s[name] = time.perf_counter() - t0
     for r in range(repeats):
         for name, (run, state) in runs.items():
             t0 = time.perf_counter()
             runs[name] = (run, jax.block_until_ready(run(state, jax.random.PRNGKey(2 + r))))
             rates[name].append(batch * steps / (time.perf_counter() - t0))
-    return {name: statistics.median(r) for name, r in rates.items()}
+    return {name: (compile_s[name], statistics.median(r)) for name, r in rates.items()}
 
 
 def pmap_speed(env, batch: int, steps: int, repeats: int, devices: int) -> float:
@@ -302,7 +293,7 @@ def main(argv=None) -> None:
     env = hexa_mjx.make_env(ctrl_hz=args.ctrl_hz, **cap)
     m = env.mj_model
     print(f"model: {env.config.model_path}  nv={m.nv} nu={m.nu} ngeom={m.ngeom} "
-          f"contact slots={env._data0._impl.contact.dist.shape[0]} "
+          f"contact slots={env.contact_slots} "
           f"solver iterations={m.opt.iterations} ls_iterations={m.opt.ls_iterations} "
           f"substeps/env step={env.n_substeps}  jax {jax.__version__} on {jax.devices()[0].platform}")
     c_rate = mujoco_c_speed(m, steps=4000, repeats=args.repeats)
@@ -322,11 +313,10 @@ def main(argv=None) -> None:
         envs = {n: hexa_mjx.make_env(ctrl_hz=args.ctrl_hz, max_contact_points=n)
                 for n in [args.max_contact_points, *args.compare_contacts]}
         rates = compare_speed(envs, args.batches[-1], args.steps, args.repeats)
-        base = rates[args.max_contact_points]
+        base = rates[args.max_contact_points][1]
         print(f"contact points kept, env steps/s at {args.batches[-1]} envs (timed in turns, median of {args.repeats}):")
-        for n, rate in rates.items():
-            slots = envs[n]._data0._impl.contact.dist.shape[0]
-            print(f"  max_contact_points={n:<3} ({slots} slots) {rate:8.0f}  {rate / base:5.2f}x")
+        for n, (_, rate) in rates.items():
+            print(f"  max_contact_points={n:<3} ({envs[n].contact_slots} slots) {rate:8.0f}  {rate / base:5.2f}x")
     if args.profile:
         p = training_profile(args.batches[-1], args.repeats, **cap)
         parts = {"physics without contacts": p["env_without_contacts"], "contacts": p["env"] - p["env_without_contacts"],

@@ -245,6 +245,11 @@ class HexapodEnv(Env):
             qpos = jp.concatenate([qpos[:3], quat, jp.clip(joints, self._joint_lo, self._joint_hi)])
         return data.replace(qpos=qpos, qvel=self._qvel0, ctrl=self._ctrl0, time=jp.zeros_like(data.time))
 
+    @property
+    def contact_slots(self) -> int:
+        """Contact points MJX solves for at every physics step (all robot-floor slots, or the cap)."""
+        return int(floor_contacts(self._data0)[2].shape[0])
+
     def observe(self, data: mjx.Data) -> jax.Array:
         """The policy's observation of a physics state (reads only qpos and qvel)."""
         goal_vec = self._goal - data.qpos[:2]

@@ -102,7 +102,7 @@ def episode_table(env, start_qpos, traj) -> dict:
         per_episode["contact_points_max"] = points.max(0)
         cap = env.config.max_contact_points
         # Steps at which the physics had as many contact points as it keeps (more may have been dropped).
-        per_episode["steps_at_contact_cap"] = ((points >= cap) * alive).sum(0) if cap else np.zeros_like(length)
+        per_episode["steps_at_contact_cap"] = (points >= cap).sum(0) if cap else np.zeros_like(length)
 
     # Per-phase figures average over the episodes that have that phase: an episode that never
     # reaches the goal has no steps to it and no steps after it (None when no episode has any).

@@ -297,7 +297,7 @@ def load_config(run_dir: Path) -> TrainConfig:
 
 
 def make_env_for(cfg: TrainConfig, **overrides):
-    """The run's environment; keyword overrides set `EnvConfig` fields (eval's start noise)."""
+    """The run's environment; keyword overrides set `EnvConfig` fields (eval's start noise, contact cap)."""
     settings = dict(ablate=tuple(cfg.ablate), ctrl_hz=cfg.ctrl_hz, episode_length=cfg.episode_length,
                     start_joint_noise=cfg.start_joint_noise, start_yaw_noise=cfg.start_yaw_noise,
                     max_contact_points=cfg.max_contact_points)
