@@ -4,6 +4,9 @@
     python eval.py --ckpt runs/goal_directed-s0/checkpoints/000002000896 --episodes 256 --no-video
     python eval.py --ckpt runs/goal_directed-s0 --start_joint_noise 0.1 --start_yaw_noise 0.3  # perturbed starts
     python eval.py --ckpt runs/goal_directed-s0 --max_contact_points 0  # physics with every contact slot
+    python eval.py --ckpt runs/navigate-s0 --episodes 256                # goals in every direction
+    python eval.py --ckpt runs/navigate-s0 --waypoints "1,0 1,1 0,1 0,0" --episode_length 3000
+    python eval.py --ckpt runs/goal_directed-s0 --task navigate          # the report's policy on those goals
 
 Runs N episodes with the deterministic policy batched on MJX, prints a table, writes
 <out>/metrics.json and <out>/episode_<i>.mp4 (out defaults to <run dir>/eval).
@@ -12,7 +15,8 @@ Runs N episodes with the deterministic policy batched on MJX, prints a table, wr
 import argparse
 import sys
 
-from hexa_mjx import evaluation
+from hexa_mjx import evaluation, jax_setup, nav_metrics
+from hexa_mjx.tasks import TASKS
 
 
 def main(argv=None) -> int:
@@ -29,14 +33,32 @@ def main(argv=None) -> int:
                         help="rad, uniform noise on the start heading (default: the run's setting)")
     parser.add_argument("--max_contact_points", type=int, default=None,
                         help="contact points the physics keeps per step, 0: all (default: the run's setting)")
+    parser.add_argument("--task", default=None, choices=sorted(TASKS),
+                        help="run the policy on this task's goals (default: its own; 'navigate' also takes "
+                             "a report-task policy, as a baseline)")
+    parser.add_argument("--waypoints", default=None,
+                        help="navigate: walk a path instead, \"x,y x,y ...\" in metres from the start, world frame, "
+                             "or a file holding that")
+    parser.add_argument("--goal_min_distance", type=float, default=None, help="navigate: m (default: the run's)")
+    parser.add_argument("--goal_max_distance", type=float, default=None, help="navigate: m (default: the run's)")
+    parser.add_argument("--episode_length", type=int, default=None,
+                        help="control steps per episode (default: the run's)")
+    parser.add_argument("--no_compile_cache", dest="compile_cache", action="store_false",
+                        help="don't keep compiled programs in the per-user cache folder")
     args = parser.parse_args(argv)
+    jax_setup.prepare_jax(compile_cache=args.compile_cache)
     if args.episodes < 1:
         parser.error("--episodes must be at least 1")
+    if args.videos < 0:
+        parser.error("--videos must be 0 or more")
     try:
+        waypoints = nav_metrics.parse_waypoints(args.waypoints) if args.waypoints is not None else None
         result = evaluation.evaluate(args.ckpt, episodes=args.episodes, videos=args.videos, out=args.out,
-                                     seed=args.seed, video=args.video, start_joint_noise=args.start_joint_noise,
-                                     start_yaw_noise=args.start_yaw_noise,
-                                     max_contact_points=args.max_contact_points)
+                                     seed=args.seed, video=args.video, task=args.task,
+                                     start_joint_noise=args.start_joint_noise, start_yaw_noise=args.start_yaw_noise,
+                                     max_contact_points=args.max_contact_points, waypoints=waypoints,
+                                     goal_min_distance=args.goal_min_distance,
+                                     goal_max_distance=args.goal_max_distance, episode_length=args.episode_length)
     except (FileNotFoundError, RuntimeError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

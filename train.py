@@ -4,20 +4,20 @@
     python train.py --preset paper --seed 1
     python train.py --run_dir runs/goal_directed-s0 --resume
 
-Flags and defaults: `python train.py --help` (hexa_mjx/training.py, TrainConfig).
+Flags and defaults: `python train.py --help` (hexa_mjx/config.py, TrainConfig).
 """
 
 import sys
 
-from hexa_mjx import training
+from hexa_mjx import config, jax_setup, training
 
 
 def main(argv=None) -> int:
-    cfg = training.parse_args(argv)
-    training.prepare_jax(cfg.cpu_devices)  # before anything starts JAX
+    cfg = config.parse_args(argv)
+    jax_setup.prepare_jax(cfg.cpu_devices, cfg.compile_cache)  # before anything starts JAX
     try:
-        training.validate(cfg)
-    except (training.ConfigError, ValueError, TypeError) as e:
+        config.validate(cfg)
+    except (config.ConfigError, ValueError, TypeError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
     try:

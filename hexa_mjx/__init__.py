@@ -15,10 +15,16 @@ if not os.environ.get("MUJOCO_GL"):
                 os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
             break
 
+# jaxlib 0.9.2 logs a long, harmless "Loading XLA:CPU AOT result" error for every program it loads
+# from the compilation cache (jax_setup.prepare_jax turns the cache on): keep XLA's C++ log quiet
+# unless the user asks for it. It must be set before jaxlib loads.
+os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "3")
+
 # mujoco.mjx prints a notice on import when the optional (GPU-only) warp backend is absent.
 with contextlib.redirect_stdout(io.StringIO()):
     from mujoco import mjx  # noqa: F401
 
-from hexa_mjx.env import EnvConfig, HexapodEnv, make_env  # noqa: E402
+from hexa_mjx.env import EnvConfig, HexapodEnv  # noqa: E402
+from hexa_mjx.tasks import TASKS, make_env  # noqa: E402
 
-__all__ = ["EnvConfig", "HexapodEnv", "make_env"]
+__all__ = ["EnvConfig", "HexapodEnv", "TASKS", "make_env"]

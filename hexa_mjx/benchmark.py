@@ -25,7 +25,7 @@ import numpy as np
 from mujoco import rollout
 
 import hexa_mjx
-from hexa_mjx import robot
+from hexa_mjx import config, jax_setup, robot
 
 
 def _rollout_fn(batched_step, action_size: int, steps: int):
@@ -132,8 +132,8 @@ def train_speed(num_envs: int = 256, updates: int = 4, devices: int = 1, **overr
 
     from hexa_mjx import training
 
-    cfg = training.TrainConfig(num_envs=num_envs, **overrides)
-    env = training.make_env_for(cfg)
+    cfg = config.TrainConfig(num_envs=num_envs, **overrides)
+    env = config.make_env_for(cfg)
     marks = [(0, time.perf_counter())]
     ppo.train(environment=env, num_timesteps=3 * updates * cfg.steps_per_update, **training.ppo_settings(cfg),
               num_evals=4, run_evals=False, max_devices_per_host=devices,
@@ -184,8 +184,8 @@ def training_profile(num_envs: int = 256, repeats: int = 3, **overrides) -> dict
 
     from hexa_mjx import training
 
-    cfg = training.TrainConfig(num_envs=num_envs, **overrides)
-    env = training.make_env_for(cfg)
+    cfg = config.TrainConfig(num_envs=num_envs, **overrides)
+    env = config.make_env_for(cfg)
     steps = cfg.steps_per_update // num_envs  # control steps per env per update
     keys = jax.random.split(jax.random.PRNGKey(0), num_envs)
 
@@ -286,9 +286,7 @@ def main(argv=None) -> None:
                         help="also time these max_contact_points at the largest batch, in turns with the setting above")
     args = parser.parse_args(argv)
 
-    from hexa_mjx import training
-
-    training.prepare_jax()  # as train.py does; single-device timings use one of the CPU devices
+    jax_setup.prepare_jax()  # as train.py does; single-device timings use one of the CPU devices
     cap = {"max_contact_points": args.max_contact_points}
     env = hexa_mjx.make_env(ctrl_hz=args.ctrl_hz, **cap)
     m = env.mj_model

@@ -1,18 +1,24 @@
-"""The hexapod goal-reaching environment: pure JAX, jit- and vmap-able, brax `Env` interface.
+"""The hexapod's physics, contacts and shaping terms: the base every task builds on.
 
-    env = make_env("goal_directed", ctrl_hz=60)
+A task (`hexa_mjx.tasks`) subclasses `HexapodEnv` and defines only what differs: where goals
+go, what the policy observes, and its own reward terms. Everything here is pure JAX, jit- and
+vmap-able, behind brax's `Env` interface:
+
+    env = make_env(task="navigate")
     state = jax.jit(env.reset)(jax.random.PRNGKey(0))
     state = jax.jit(env.step)(state, jp.zeros(env.action_size))
 
-Episode bookkeeping that must not leak across an automatic reset lives in
-`state.info` and is reset by `step` itself on the last step of an episode (brax's
-AutoResetWrapper restores only `pipeline_state` and `obs`); the previous distance
-to the goal is derived from the previous physics state rather than stored.
+The current goal is the position of the model's `goal` mocap body, so it is part of the physics
+state (`pipeline_state.mocap_pos`): auto-resets restore it with the rest of the state, a recorded
+trajectory carries it, and the video draws it where it was. Episode bookkeeping that must not leak
+across an automatic reset lives in `state.info` and is reset by `step` itself on the last step of
+an episode (brax's AutoResetWrapper restores only `pipeline_state` and `obs`).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 from pathlib import Path
 
 import jax
@@ -26,21 +32,17 @@ from mujoco import mjx
 from hexa_mjx import rewards, robot
 
 
-# The goal bonus per step in the goal, logged for every reward variant so they can be compared.
-REPORT_GOAL_BONUS = rewards.VARIANTS["goal_directed"]["goal_bonus"]
-
-
 @dataclasses.dataclass(frozen=True)
 class EnvConfig:
     """Environment settings; `make_env(**overrides)` sets any of them by name."""
 
-    reward: str = "goal_directed"  # a key of rewards.VARIANTS
+    task: str = "goal"  # a key of hexa_mjx.tasks.TASKS
+    reward: str = ""  # a key of rewards.VARIANTS valid for the task; "": the task's own
     ablate: tuple[str, ...] = ()  # keys of rewards.ABLATIONS whose terms are zeroed
     reward_scales: dict = dataclasses.field(default_factory=dict)  # per-term scale overrides
     model_path: str = str(robot.MODEL_XML)
     ctrl_hz: float = 60.0  # Hz, policy rate; 240 Hz physics / ctrl_hz must be whole
     episode_length: int = 1000  # control steps
-    goal_distance: float = 1.5  # m, goal placed this far ahead (+x) of the start
     success_radius: float = 0.5  # m
     # The goal bonus is paid only while nothing but the feet touches the floor. The report pays it
     # for being within the radius; with that, policies reached the goal, then rested on their shins
@@ -51,13 +53,25 @@ class EnvConfig:
     settle_steps: int = 100  # physics steps the start pose settles before the first observation
     # Start-state noise, drawn per reset (the report starts every episode from the same pose).
     start_joint_noise: float = 0.0  # rad, each joint's start angle is offset uniformly in +-this
-    start_yaw_noise: float = 0.0  # rad, the start heading is turned uniformly in +-this (goal stays at +x)
+    start_yaw_noise: float = 0.0  # rad, the start heading is turned uniformly in +-this (navigate: always pi)
     solver_iterations: int | None = None  # None: the model's own setting
     ls_iterations: int | None = None
     # MJX gives every robot-floor geom pair fixed contact slots (40 on the report's hexapod: box 4,
     # capsules 2, spheres 1) and solves for all of them each step. N > 0 keeps only the N deepest
     # (MJX's `max_contact_points`); 0 keeps every slot. See docs/RESULTS.md, "Speed".
     max_contact_points: int = 0
+    # Report task ("goal"): one goal this far ahead (+x) of the start.
+    goal_distance: float = 1.5  # m
+    # Navigation task ("navigate"): goals at a bearing uniform over 360 degrees from the torso and a
+    # distance uniform in [goal_min_distance, goal_max_distance]; a new one each time one is reached.
+    goal_min_distance: float = 0.5  # m
+    goal_max_distance: float = 3.0  # m
+    # Navigation: the observed distance is capped here (0: goal_max_distance). A policy keeps the
+    # cap it was trained with when evaluated on another range.
+    goal_distance_cap: float = 0.0  # m
+    # Navigation: a fixed path instead of random goals, ((x, y), ...) in metres, world frame,
+    # relative to the start position. The last waypoint stays the goal once reached.
+    waypoints: tuple = ()
 
 
 def floor_contacts(data: mjx.Data):
@@ -68,8 +82,6 @@ def floor_contacts(data: mjx.Data):
 
 def _load_model(path: Path, max_contact_points: int) -> mujoco.MjModel:
     """The MJCF at `path` with MJX's contact cap set (0: none, whatever the file says)."""
-    if max_contact_points < 0:
-        raise ValueError(f"max_contact_points must be 0 (every contact slot) or positive, got {max_contact_points}")
     spec = mujoco.MjSpec.from_file(str(path))
     for numeric in spec.numerics:
         if numeric.name == "max_contact_points":
@@ -87,22 +99,61 @@ def roll_pitch(quat):
     return roll, pitch
 
 
-def _quat_mul(a, b):
+def yaw(quat):
+    """Heading (ZYX Euler yaw, rad) of a (w, x, y, z) quaternion."""
+    w, x, y, z = quat
+    return jp.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+
+
+def quat_mul(a, b):
     """Hamilton product of two (w, x, y, z) quaternions."""
     return jp.concatenate([a[:1] * b[:1] - a[1:] @ b[1:],
                            a[0] * b[1:] + b[0] * a[1:] + jp.cross(a[1:], b[1:])])
 
 
-def _rotate(vec, quat):
+def rotate(vec, quat):
     """Rotate `vec` by the (w, x, y, z) quaternion `quat`."""
     w, u = quat[0], quat[1:]
     return vec + 2 * jp.cross(u, jp.cross(u, vec) + w * vec)
 
 
+def check_config(config: EnvConfig) -> None:
+    """Raise ValueError for settings out of range (before any model is built or compiled)."""
+    for name in ("ctrl_hz", "success_radius", "goal_distance", "goal_max_distance", "target_height"):
+        value = getattr(config, name)
+        if not (math.isfinite(value) and value > 0):
+            raise ValueError(f"{name} must be a finite number above 0, got {value}")
+    if not (math.isfinite(config.goal_distance_cap) and config.goal_distance_cap >= 0):
+        raise ValueError(f"goal_distance_cap must be 0 (the range's end) or a distance in m, got {config.goal_distance_cap}")
+    for name in ("start_joint_noise", "start_yaw_noise"):
+        if not 0 <= getattr(config, name) <= np.pi:
+            raise ValueError(f"{name} is a range in radians from 0 to pi, got {getattr(config, name)}")
+    if not (math.isfinite(config.goal_min_distance) and 0 <= config.goal_min_distance <= config.goal_max_distance):
+        raise ValueError(f"the goal distance range needs 0 <= min <= max, got min {config.goal_min_distance} "
+                         f"and max {config.goal_max_distance} m")
+    if config.episode_length < 1:
+        raise ValueError(f"episode_length must be at least 1, got {config.episode_length}")
+    if config.max_contact_points < 0:
+        raise ValueError(f"max_contact_points must be 0 (every contact slot) or positive, "
+                         f"got {config.max_contact_points}")
+    for point in config.waypoints:
+        if len(point) != 2 or not all(math.isfinite(float(c)) for c in point):
+            raise ValueError(f"a waypoint is a pair of finite coordinates x,y in metres, got {point}")
+
+
 class HexapodEnv(Env):
-    """Walk to a goal `goal_distance` ahead; see the README for observation, action and reward."""
+    """The robot on a floor with a goal marker; a task subclass adds goals, observation and terms."""
+
+    name = ""  # the task's name in hexa_mjx.tasks.TASKS
+    rewards: tuple[str, ...] = ()  # the task's reward variants, its default first
 
     def __init__(self, config: EnvConfig = EnvConfig()):
+        check_config(config)
+        config = dataclasses.replace(config, task=self.name, reward=config.reward or self.rewards[0])
+        if config.reward not in rewards.VARIANTS:
+            raise ValueError(f"unknown reward {config.reward!r}; the {self.name} task's are {list(self.rewards)}")
+        if config.reward not in self.rewards:
+            raise ValueError(f"reward {config.reward!r} is not one of the {self.name} task's: {list(self.rewards)}")
         self.config = config
         self.scales = rewards.make_scales(config.reward, config.ablate, config.reward_scales)
         path = Path(config.model_path)
@@ -116,17 +167,12 @@ class HexapodEnv(Env):
         self.mj_model = model
 
         substeps = 1.0 / (config.ctrl_hz * model.opt.timestep)
-        if config.ctrl_hz <= 0 or abs(substeps - round(substeps)) > 1e-3 or round(substeps) < 1:
+        if abs(substeps - round(substeps)) > 1e-3 or round(substeps) < 1:
             rate = round(1.0 / model.opt.timestep, 3)  # the MJCF stores the timestep to 6 digits
             choices = [round(rate / n, 3) for n in range(1, 13) if abs(rate / n - round(rate / n)) < 1e-3]
             raise ValueError(f"ctrl_hz={config.ctrl_hz} is not the {rate:g} Hz physics rate divided by a whole "
                              f"number; choose e.g. one of {choices}")
         self.n_substeps = int(round(substeps))
-        if config.episode_length < 1:
-            raise ValueError(f"episode_length must be at least 1, got {config.episode_length}")
-        for name in ("start_joint_noise", "start_yaw_noise"):
-            if not 0 <= getattr(config, name) <= np.pi:
-                raise ValueError(f"{name} is a range in radians from 0 to pi, got {getattr(config, name)}")
 
         self._floor = model.geom(robot.FLOOR_GEOM).id
         self._torso = model.body(robot.TORSO_BODY).id
@@ -143,7 +189,9 @@ class HexapodEnv(Env):
         for b in range(1, model.nbody):  # bodies without joints inherit their parent's leg
             if body_leg[b] < 0 and model.body_parentid[b] > 0:
                 body_leg[b] = body_leg[model.body_parentid[b]]
-        self._geom_leg = jp.asarray(body_leg[model.geom_bodyid])
+        self.geom_leg = body_leg[model.geom_bodyid]
+        self.feet = self._feet
+        self._geom_leg = jp.asarray(self.geom_leg)
         self._geom_is_foot = jp.asarray(np.isin(np.arange(model.ngeom), self._feet))
         self._ctrl_lo, self._ctrl_hi = (jp.asarray(x, dtype=jp.float32) for x in model.actuator_ctrlrange.T)
 
@@ -152,11 +200,11 @@ class HexapodEnv(Env):
         mujoco.mj_resetDataKeyframe(model, data, model.key("home").id)
         for _ in range(config.settle_steps):
             mujoco.mj_step(model, data)
+        self.qpos0, self.qvel0 = np.array(data.qpos), np.array(data.qvel)
         self._qpos0, self._qvel0, self._ctrl0 = (jp.asarray(x, dtype=jp.float32) for x in (data.qpos, data.qvel, data.ctrl))
         self._start_xy = jp.asarray(data.qpos[:2], dtype=jp.float32)
         hinge_range = model.jnt_range[model.jnt_type == mujoco.mjtJoint.mjJNT_HINGE]
         self._joint_lo, self._joint_hi = (jp.asarray(x, dtype=jp.float32) for x in hinge_range.T)
-        self._goal = self._start_xy + jp.array([config.goal_distance, 0.0])
         self.mjx_model = mjx.put_model(model, impl="jax")
         self._data0 = mjx.make_data(self.mjx_model, impl="jax")
 
@@ -164,7 +212,7 @@ class HexapodEnv(Env):
 
     @property
     def observation_size(self) -> int:
-        return 13 + 2 * self.mj_model.nu + 3
+        return int(jax.eval_shape(self.observe, self._data0).shape[0])
 
     @property
     def action_size(self) -> int:
@@ -179,16 +227,24 @@ class HexapodEnv(Env):
         """Control period, s."""
         return self.n_substeps * float(self.mj_model.opt.timestep)
 
+    @property
+    def fresh_starts(self) -> bool:
+        """Whether episodes start from random states (training must redraw them at every reset)."""
+        return bool(self.config.start_joint_noise or self.start_yaw_range)
+
+    @property
+    def start_yaw_range(self) -> float:
+        """The start heading is turned uniformly in +-this, rad."""
+        return self.config.start_yaw_noise
+
     def reset(self, rng: jax.Array) -> State:
         """Start an episode from the settled standing pose, perturbed by the start noise."""
-        mocap = self._data0.mocap_pos.at[self._goal_mocap, :2].set(self._goal)
-        data = self.restart(self._data0.replace(mocap_pos=mocap), rng)
-        data = mjx.forward(self.mjx_model, data)
+        data = mjx.forward(self.mjx_model, self.restart(self._data0, rng))
         zero = jp.zeros(())
         metrics = {f"reward/{name}": zero for name in self._active_terms()}
-        metrics.update(distance=self._distance(data), success=zero, fell=zero, nonfinite=zero, goal_bonus=zero,
-                       final_distance=zero, final_success=zero)
-        info = {"rng": rng, "t": jp.zeros((), jp.int32), "success": zero}
+        metrics.update(distance=self.goal_distance(data), success=zero, fell=zero, nonfinite=zero, goal_bonus=zero,
+                       goals_reached=zero, final_distance=zero, final_success=zero)
+        info = {"rng": rng, "t": jp.zeros((), jp.int32), "success": zero, "goals": jp.zeros((), jp.int32)}
         return State(data, self.observe(data), zero, zero, metrics, info)
 
     def step(self, state: State, action: jax.Array) -> State:
@@ -210,52 +266,66 @@ class HexapodEnv(Env):
         roll, pitch = roll_pitch(data.qpos[3:7])
         fell = (jp.abs(roll) > jp.pi / 2) | (jp.abs(pitch) > jp.pi / 2)
         done = fell | ~finite
-        dist = self._distance(data)
-        terms = self._terms(prev, data, done, roll, pitch, dist)
-        scaled = {name: self.scales[name] * value for name, value in terms.items()}
+        # Every term sees the goal of this step; a goal reached now is replaced only afterwards, so
+        # the step that draws a new goal pays no spurious approach reward or penalty.
+        dist = self.goal_distance(data)
+        reached = dist < self.config.success_radius
+        completed = self.goal_completed(reached, state.info["goals"])
+        scaled = {name: self.scales[name] * value
+                  for name, value in self.reward_terms(prev, data, done, completed).items()}
         reward = sum(scaled.values())
 
-        success = jp.maximum(state.info["success"], (dist < self.config.success_radius).astype(jp.float32))
         t = state.info["t"] + 1
         over = done | (t >= self.config.episode_length)
-        info = {**state.info, "t": jp.where(over, 0, t), "success": jp.where(over, 0.0, success)}
+        rng, key = jax.random.split(state.info["rng"])
+        goals = state.info["goals"] + completed
+        data = self.set_goal(data, jp.where(completed, self.next_goal(data, goals, key), self.goal(data)))
+        success = jp.maximum(state.info["success"], reached.astype(jp.float32))
+        info = {**state.info, "rng": rng, "t": jp.where(over, 0, t), "success": jp.where(over, 0.0, success),
+                "goals": jp.where(over, 0, goals)}
         # Start from the incoming metrics: wrappers (brax's evaluator) add keys of their own.
         metrics = {**state.metrics, **{f"reward/{name}": value for name, value in scaled.items()}}
         # Per-step values whose sums over an episode are the per-episode figures brax's evaluator reports.
         metrics.update(distance=dist, success=success, fell=fell.astype(jp.float32),
-                       nonfinite=(~finite).astype(jp.float32),
-                       goal_bonus=REPORT_GOAL_BONUS * rewards.goal_bonus(dist, self.config.success_radius),
+                       nonfinite=(~finite).astype(jp.float32), goals_reached=completed.astype(jp.float32),
+                       goal_bonus=rewards.VARIANTS["goal_directed"]["goal_bonus"] * rewards.goal_bonus(
+                           dist, self.config.success_radius),
                        final_distance=jp.where(over, dist, 0.0), final_success=jp.where(over, success, 0.0))
         return state.replace(pipeline_state=data, obs=self.observe(data), reward=reward,
                              done=done.astype(jp.float32), metrics=metrics, info=info)
 
     def restart(self, data: mjx.Data, rng: jax.Array) -> mjx.Data:
-        """`data` with a fresh start state (qpos, qvel, ctrl, time) drawn with `rng`.
+        """`data` with a fresh start state (qpos, qvel, ctrl, time) and first goal drawn with `rng`.
 
         Quantities derived from the state (positions, contacts) are left as they are: the next
         `mjx.step` recomputes them from qpos and qvel, and the observation needs only those.
         """
         qpos = self._qpos0
-        if self.config.start_joint_noise or self.config.start_yaw_noise:
+        if self.config.start_joint_noise or self.start_yaw_range:
             k_joint, k_yaw = jax.random.split(rng)
             noise = self.config.start_joint_noise
             joints = qpos[7:] + jax.random.uniform(k_joint, qpos[7:].shape, minval=-noise, maxval=noise)
-            half_yaw = 0.5 * jax.random.uniform(k_yaw, minval=-1.0, maxval=1.0) * self.config.start_yaw_noise
-            quat = _quat_mul(jp.array([jp.cos(half_yaw), 0.0, 0.0, jp.sin(half_yaw)]), qpos[3:7])
+            half_yaw = 0.5 * jax.random.uniform(k_yaw, minval=-1.0, maxval=1.0) * self.start_yaw_range
+            quat = quat_mul(jp.array([jp.cos(half_yaw), 0.0, 0.0, jp.sin(half_yaw)]), qpos[3:7])
             qpos = jp.concatenate([qpos[:3], quat, jp.clip(joints, self._joint_lo, self._joint_hi)])
-        return data.replace(qpos=qpos, qvel=self._qvel0, ctrl=self._ctrl0, time=jp.zeros_like(data.time))
+        data = data.replace(qpos=qpos, qvel=self._qvel0, ctrl=self._ctrl0, time=jp.zeros_like(data.time))
+        return self.set_goal(data, self.first_goal(qpos, jax.random.fold_in(rng, 2)))
+
+    def goal(self, data: mjx.Data) -> jax.Array:
+        """The current goal's (x, y), m, world frame."""
+        return data.mocap_pos[self._goal_mocap, :2]
+
+    def set_goal(self, data: mjx.Data, goal_xy: jax.Array) -> mjx.Data:
+        return data.replace(mocap_pos=data.mocap_pos.at[self._goal_mocap, :2].set(goal_xy))
+
+    def goal_distance(self, data: mjx.Data) -> jax.Array:
+        """Planar distance from the torso origin to the current goal, m."""
+        return jp.linalg.norm(self.goal(data) - data.qpos[:2])
 
     @property
     def contact_slots(self) -> int:
         """Contact points MJX solves for at every physics step (all robot-floor slots, or the cap)."""
         return int(floor_contacts(self._data0)[2].shape[0])
-
-    def observe(self, data: mjx.Data) -> jax.Array:
-        """The policy's observation of a physics state (reads only qpos and qvel)."""
-        goal_vec = self._goal - data.qpos[:2]
-        angvel_world = _rotate(data.qvel[3:6], data.qpos[3:7])  # free-joint angular velocity is body-frame
-        return jp.concatenate([data.qpos[:3], data.qpos[3:7], data.qvel[:3], angvel_world,
-                               data.qpos[7:], data.qvel[6:], goal_vec, jp.linalg.norm(goal_vec)[None]])
 
     def floor_contact_geoms(self, data: mjx.Data):
         """(active robot-floor contact mask, the robot geom of each contact) over MJX's contact slots."""
@@ -273,26 +343,50 @@ class HexapodEnv(Env):
         bad = on_floor & (leg >= 0) & lifted
         return bad.sum(), (on_floor & ~self._geom_is_foot[other]).sum()
 
+    def reward_terms(self, prev: mjx.Data, data: mjx.Data, done, completed) -> dict:
+        """Unscaled values of the active reward terms for the transition prev -> data."""
+        roll, pitch = roll_pitch(data.qpos[3:7])
+        inputs = self._term_inputs(prev, data, done, roll, pitch, completed)
+        return {name: rewards.TERMS[name](*inputs[name]) for name in self._active_terms()}
+
+    # -- what a task defines ----------------------------------------------------
+
+    def observe(self, data: mjx.Data) -> jax.Array:
+        """The policy's observation of a physics state (reads only qpos, qvel, ctrl and the goal)."""
+        raise NotImplementedError
+
+    def first_goal(self, qpos: jax.Array, rng: jax.Array) -> jax.Array:
+        """The goal (x, y) of an episode starting at `qpos`."""
+        raise NotImplementedError
+
+    def goal_completed(self, reached: jax.Array, goals: jax.Array) -> jax.Array:
+        """Whether this step completes a goal, given that the torso is within the radius (`reached`)
+        and `goals` goals were completed earlier in the episode. Default: goals are never replaced."""
+        return jp.zeros((), bool)
+
+    def next_goal(self, data: mjx.Data, goals: jax.Array, rng: jax.Array) -> jax.Array:
+        """The goal (x, y) that follows `goals` completed goals, from the state that completed the last."""
+        return self.goal(data)
+
     # -- internals ------------------------------------------------------------
 
     def _active_terms(self):
         return [name for name, scale in self.scales.items() if scale != 0.0]
 
-    def _distance(self, data):
-        return jp.linalg.norm(self._goal - data.qpos[:2])
-
-    def _terms(self, prev, data, done, roll, pitch, dist):
-        """Unscaled values of the active reward terms for one transition."""
+    def _term_inputs(self, prev, data, done, roll, pitch, completed):
+        """Arguments of every reward term, by name; XLA drops what no active term uses."""
         xy, prev_xy, vel_xy = data.qpos[:2], prev.qpos[:2], data.qvel[:2]
-        goal_dir = self._goal - xy
+        goal_dir = self.goal(data) - xy
         goal_dir = goal_dir / jp.maximum(jp.linalg.norm(goal_dir), 1e-6)
         bad, non_foot = self.contact_counts(data)
-        dist_prev = self._distance(prev)
-        # Inputs of every term; XLA drops whatever the active terms do not use.
-        inputs = {
-            "goal_approach": (dist_prev, dist),
+        # The previous position's distance to this step's goal (the goal only moves after the terms).
+        dist_prev = jp.linalg.norm(self.goal(data) - prev_xy)
+        return {
+            "goal_approach": (dist_prev, self.goal_distance(data)),
+            "goal_reached": (completed,),
             "velocity_alignment": (vel_xy, goal_dir),
-            "goal_bonus": (dist, self.config.success_radius, non_foot if self.config.bonus_on_feet_only else 0),
+            "goal_bonus": (self.goal_distance(data), self.config.success_radius,
+                           non_foot if self.config.bonus_on_feet_only else 0),
             "stability": (roll, pitch),
             "height": (data.qpos[2], self.config.target_height),
             "energy": (data.qvel[6:],),
@@ -302,16 +396,3 @@ class HexapodEnv(Env):
             "forward_progress": (prev_xy, xy),
             "forward_velocity": (vel_xy,),
         }
-        return {name: rewards.TERMS[name](*inputs[name]) for name in self._active_terms()}
-
-
-def make_env(reward: str = "goal_directed", **overrides) -> HexapodEnv:
-    """Build the environment for a reward variant; keyword overrides set `EnvConfig` fields."""
-    fields = {f.name for f in dataclasses.fields(EnvConfig)}
-    unknown = sorted(set(overrides) - fields)
-    if unknown:
-        raise TypeError(f"unknown environment setting(s) {unknown}; valid names are {sorted(fields - {'reward'})}")
-    if "ablate" in overrides:
-        ablate = overrides["ablate"]
-        overrides["ablate"] = (ablate,) if isinstance(ablate, str) else tuple(ablate)
-    return HexapodEnv(EnvConfig(reward=reward, **overrides))

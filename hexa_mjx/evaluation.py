@@ -13,7 +13,7 @@ import jax
 import jax.numpy as jp
 import numpy as np
 
-from hexa_mjx import robot, training
+from hexa_mjx import checkpoints, config, nav_metrics, robot, training
 
 GL_PACKAGES = "libegl1 libegl-mesa0 libosmesa6"  # Debian/Ubuntu
 
@@ -24,10 +24,10 @@ CONTACT_GROUPS = ("torso", "hip and knee links", "shins", "feet")
 def contact_groups(env) -> np.ndarray:
     """Index into CONTACT_GROUPS for every geom of the model (the torso group includes the world)."""
     m = env.mj_model
-    leg = np.asarray(env._geom_leg)
-    shin = np.isin(m.geom_bodyid, m.geom_bodyid[env._feet])  # the feet's own bodies: the last leg links
+    leg = env.geom_leg
+    shin = np.isin(m.geom_bodyid, m.geom_bodyid[env.feet])  # the feet's own bodies: the last leg links
     group = np.where(leg < 0, 0, np.where(shin, 2, 1))
-    group[env._feet] = 3
+    group[env.feet] = 3
     return group
 
 
@@ -40,8 +40,8 @@ def group_contacts(env, data, groups) -> jax.Array:
 
 def rollout(env, policy, num_episodes: int, seed: int = 0):
     """Run `num_episodes` episodes in parallel to their end; returns per-step arrays (time first)
-    of qpos, reward, done, distance, floor contacts per CONTACT_GROUPS entry and the env's metrics,
-    with `alive` marking steps in an episode."""
+    of qpos, the goal each step is scored against, reward, done, distance, floor contacts per
+    CONTACT_GROUPS entry and the env's metrics, with `alive` marking steps in an episode."""
     steps = env.config.episode_length
     groups = contact_groups(env)
 
@@ -53,10 +53,11 @@ def rollout(env, policy, num_episodes: int, seed: int = 0):
             state, alive = carry
             action = policy(state.obs, key)
             nxt = jax.vmap(env.step)(state, action)
-            out = {"qpos": nxt.pipeline_state.qpos, "reward": nxt.reward, "done": nxt.done, "alive": alive,
+            out = {"qpos": nxt.pipeline_state.qpos, "goal": jax.vmap(env.goal)(state.pipeline_state),
+                   "reward": nxt.reward, "done": nxt.done, "alive": alive,
                    "contacts": jax.vmap(lambda d: group_contacts(env, d, groups))(nxt.pipeline_state),
                    **{k: v for k, v in nxt.metrics.items()
-                      if k.startswith("reward/") or k in ("distance", "fell", "goal_bonus", "nonfinite")}}
+                      if k.startswith("reward/") or k in ("distance", "fell", "goal_bonus", "nonfinite", "goals_reached")}}
             return (nxt, alive * (1.0 - nxt.done)), out
 
         start_qpos = state.pipeline_state.qpos
@@ -136,7 +137,28 @@ def episode_table(env, start_qpos, traj) -> dict:
         "reward_terms": {k[len("reward/"):]: float((traj[k] * alive).sum(0).mean())
                          for k in traj if k.startswith("reward/")},
     }
-    return {"summary": summary, "per_episode": {k: v.tolist() for k, v in per_episode.items()}}
+    if "contacts" in traj:
+        non_foot = traj["contacts"][..., :CONTACT_GROUPS.index("feet")].sum(-1)
+        summary["feet_only_steps"] = float(((non_foot == 0) * alive).sum() / max(alive.sum(), 1))
+    per_episode = {k: v.tolist() for k, v in per_episode.items()}
+    if getattr(env, "name", "") == "navigate":
+        args = (start_qpos, traj["qpos"], traj["goals_reached"], alive, np.asarray(per_episode["fell"]))
+        if env.config.waypoints:
+            summary["waypoints"] = nav_metrics.waypoint_summary(*args, env.config.waypoints, env.dt)
+            per_episode["waypoints"] = summary["waypoints"].pop("per_episode")
+        else:
+            records = nav_metrics.goals_of_episodes(start_qpos, traj["qpos"], traj["goal"], traj["goals_reached"],
+                                                    alive, per_episode["fell"], env.dt)
+            summary["navigation"] = nav_metrics.navigation_summary(
+                records, alive.shape[1], env.config.success_radius, body_length(env),
+                env.config.goal_min_distance, env.config.goal_max_distance)
+            per_episode["goals"] = records
+    return {"summary": summary, "per_episode": per_episode}
+
+
+def body_length(env) -> float:
+    """Length of the torso box along its forward axis, m."""
+    return 2.0 * float(env.mj_model.geom(robot.TORSO_GEOM).size[0])
 
 
 def format_table(summary: dict) -> str:
@@ -162,20 +184,50 @@ def format_table(summary: dict) -> str:
         kept = (f"physics keeps {cap}; at that cap in {summary['steps_at_contact_cap']:,} of {summary['steps']:,} "
                 "steps" if cap else "physics keeps every contact")
         rows.append(("floor contact points at once, most", f"{summary['contact_points_max']} ({kept})"))
+    if "feet_only_steps" in summary:
+        rows.append(("steps with only feet on the floor", f"{summary['feet_only_steps']:.2%}"))
+    rows += navigation_rows(summary)
     rows += [(f"  reward/{k}, per episode", f"{v:.1f}") for k, v in summary["reward_terms"].items()]
     width = max(len(k) for k, _ in rows)
     return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
 
 
-def render_video(env, qpos_frames: np.ndarray, path: Path, width=640, height=480) -> int:
-    """Render qpos frames (T, nq) from the tracking camera into an MP4 at the control rate."""
+def navigation_rows(summary: dict) -> list[tuple[str, str]]:
+    """Table rows of the navigation task: per-sector and per-band success, goals, speed; or a path."""
+    pct = lambda x: "-" if x is None else f"{x:.1%}"  # noqa: E731
+    num = lambda x, fmt: "-" if x is None else format(x, fmt)  # noqa: E731
+    rows = []
+    if "navigation" in summary:
+        nav = summary["navigation"]
+        rows.append(("first goal reached", pct(nav["first_goal_success"])))
+        for key, title in (("sectors", "  bearing"), ("bands", "  distance")):
+            rows += [(f"{title} {label}", f"{pct(v['success'])} of {v['goals']}") for label, v in nav[key].items()]
+        rows += [("goals reached per episode, mean (min)",
+                  f"{nav['goals_per_episode_mean']:.2f} ({nav['goals_per_episode_min']})"),
+                 ("seconds per metre of goal distance", num(nav["seconds_per_metre"], ".2f")),
+                 ("speed toward the goal", f"{num(nav['speed_to_goal'], '.3f')} m/s = "
+                                           f"{num(nav['speed_to_goal_body_lengths'], '.2f')} torso lengths/s"),
+                 ("heading error on arrival, mean", f"{num(nav['heading_error_deg_mean'], '.0f')} deg")]
+    if "waypoints" in summary:
+        path = summary["waypoints"]
+        rows += [("waypoints", " ".join(f"{x:g},{y:g}" for x, y in path["waypoints"])),
+                 ("path completed", pct(path["completed_rate"])),
+                 ("arrival at each waypoint, mean", ", ".join(num(t, ".1f") + " s" for t in path["arrival_s_mean"])),
+                 ("largest deviation from the path, mean (median)",
+                  f"{path['max_deviation_mean']:.3f} m ({path['max_deviation_median']:.3f} m)")]
+    return rows
+
+
+def render_video(env, qpos_frames: np.ndarray, path: Path, goals: np.ndarray, waypoints=(), width=640,
+                 height=480) -> int:
+    """Render qpos frames (T, nq) from the tracking camera into an MP4 at the control rate, with the
+    goal marker at each frame's goal (T, 2) and the waypoint path (start -> waypoints) drawn."""
     import imageio.v2 as imageio
     import mujoco
 
     model = env.mj_model
     data = mujoco.MjData(model)
     mocap = model.body_mocapid[model.body(robot.GOAL_BODY).id]
-    data.mocap_pos[mocap, :2] = np.asarray(env._goal)
     if not os.environ.get("MUJOCO_GL"):
         raise RuntimeError(f"no off-screen OpenGL found (neither EGL nor OSMesa): install it with "
                            f"`apt-get install {GL_PACKAGES}`, or pass --no-video")
@@ -187,48 +239,87 @@ def render_video(env, qpos_frames: np.ndarray, path: Path, width=640, height=480
             f"off-screen OpenGL ({backend}) is not usable: {e}. Install it with "
             f"`apt-get install {GL_PACKAGES}` (or try MUJOCO_GL=osmesa), "
             "or pass --no-video") from e
+    corners = np.vstack([qpos_frames[0, :2], np.asarray(waypoints, float).reshape(-1, 2) + env.qpos0[:2]])
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.stem + ".tmp" + path.suffix)
     with imageio.get_writer(tmp, fps=round(1 / env.dt), codec="libx264", quality=7, macro_block_size=16) as writer:
-        for qpos in qpos_frames:
+        for qpos, goal in zip(qpos_frames, goals):
             data.qpos[:] = qpos
+            data.mocap_pos[mocap, :2] = goal
             mujoco.mj_forward(model, data)
             renderer.update_scene(data, camera=robot.TRACKING_CAMERA)
+            if waypoints:
+                draw_path(renderer.scene, corners)
             writer.append_data(renderer.render())
     renderer.close()
     tmp.replace(path)
     return len(qpos_frames)
 
 
+def draw_path(scene, corners: np.ndarray, width=0.01, height=0.003) -> None:
+    """Add the polyline through `corners` (x, y on the floor, m) to a MuJoCo scene as thin capsules."""
+    import mujoco
+
+    for a, b in zip(corners[:-1], corners[1:]):
+        if scene.ngeom >= scene.maxgeom:
+            return
+        geom = scene.geoms[scene.ngeom]
+        mujoco.mjv_initGeom(geom, mujoco.mjtGeom.mjGEOM_CAPSULE, np.zeros(3), np.zeros(3), np.eye(3).ravel(),
+                            np.array([0.9, 0.5, 0.1, 1.0], np.float32))
+        mujoco.mjv_connector(geom, mujoco.mjtGeom.mjGEOM_CAPSULE, width, np.array([*a, height]),
+                             np.array([*b, height]))
+        scene.ngeom += 1
+
+
 def evaluate(ckpt: str | Path, episodes: int = 128, videos: int = 1, out: str | Path | None = None,
-             seed: int = 0, video: bool = True, **env_overrides) -> dict:
+             seed: int = 0, video: bool = True, task: str | None = None, **env_overrides) -> dict:
     """Load a checkpoint, run `episodes` deterministic episodes, write metrics JSON and videos.
 
-    `start_joint_noise` / `start_yaw_noise` / `max_contact_points` keywords replace the run's own
-    setting (None keeps it). Without start noise every episode starts from the same state and the
-    episodes differ only by numerics.
+    Keywords that are `EnvConfig` fields (start noise, contact cap, goal range, waypoints, episode
+    length) replace the run's own setting (None keeps it). `task="navigate"` runs a report-task
+    policy on the navigation task's goals. Without start noise (report task) every episode starts
+    from the same state and the episodes differ only by numerics.
     """
-    run_dir, ckpt_dir = training.resolve_checkpoint(Path(ckpt))
-    cfg = training.load_config(run_dir)
-    env = training.make_env_for(cfg, **{k: v for k, v in env_overrides.items() if v is not None})
-    step, params = training.load_checkpoint(ckpt_dir, training.init_params(cfg, env))
+    run_dir, ckpt_dir = checkpoints.resolve_checkpoint(Path(ckpt))
+    cfg = config.load_config(run_dir)
+    overrides = {k: v for k, v in env_overrides.items() if v is not None}
+    if overrides.get("waypoints") and (task or cfg.task) != "navigate":
+        raise ValueError(f"waypoints need a navigation policy; {run_dir} holds a {cfg.task} policy "
+                         "(add --task navigate to try the report's policy on them)")
+    env = config.make_env_for(cfg, task=task or "", **overrides)
+    out = Path(out) if out else run_dir / "eval"
+    check_writable(out)
+    step, params = checkpoints.load_checkpoint(ckpt_dir, training.init_params(cfg, env))
     policy = training.make_inference(cfg, env, params, deterministic=True)
     start, traj = rollout(env, policy, episodes, seed)
     table = episode_table(env, start, traj)
-    out = Path(out) if out else run_dir / "eval"
-    out.mkdir(parents=True, exist_ok=True)
-    run = {"reward": cfg.reward, "ablate": cfg.ablate, "seed": cfg.seed,
-           "start_joint_noise": env.config.start_joint_noise, "start_yaw_noise": env.config.start_yaw_noise,
-           "max_contact_points": env.config.max_contact_points}
+    run = {"task": env.name, "policy_task": cfg.task, "reward": cfg.reward, "ablate": cfg.ablate, "seed": cfg.seed,
+           "start_joint_noise": env.config.start_joint_noise, "start_yaw_noise": env.start_yaw_range,
+           "max_contact_points": env.config.max_contact_points, "episode_length": env.config.episode_length}
+    if env.name == "navigate":
+        run.update(goal_min_distance=env.config.goal_min_distance, goal_max_distance=env.config.goal_max_distance,
+                   waypoints=[list(p) for p in env.config.waypoints])
     result = {"checkpoint": str(ckpt_dir), "step": step, "config": run, **table, "videos": []}
     if video:
         for i in range(min(videos, episodes)):
             n = int(traj["alive"][:, i].sum())
             frames = np.concatenate([start[i:i + 1], traj["qpos"][:n, i]])
+            goals = traj["goal"][np.minimum(np.arange(n + 1), n - 1), i]  # each frame: the goal walked to next
             path = out / f"episode_{i}.mp4"
-            render_video(env, frames, path)
+            render_video(env, frames, path, goals, env.config.waypoints)
             result["videos"].append(str(path))
     tmp = out / "metrics.json.tmp"
     tmp.write_text(json.dumps(result, indent=1))
     tmp.replace(out / "metrics.json")
     return result
+
+
+def check_writable(folder: Path) -> None:
+    """Create `folder` or fail now, not after the rollout, with what to do."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        probe = folder / ".write-test"
+        probe.write_text("")
+        probe.unlink()
+    except OSError as e:
+        raise ValueError(f"cannot write to {folder} ({e.strerror}); choose another --out") from None

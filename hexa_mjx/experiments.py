@@ -3,6 +3,8 @@
     python -m hexa_mjx.experiments main       [--timesteps N] [--seeds K] [--out DIR] [--max_contact_points N]
     python -m hexa_mjx.experiments ablation   [...]
     python -m hexa_mjx.experiments lr         [...]
+    python -m hexa_mjx.experiments navigate   [...]     # the navigation task, 3 seeds
+    python -m hexa_mjx.experiments ablation --task navigate   # a study on the navigation task
     python -m hexa_mjx.experiments aggregate  --out DIR      # figures and tables from existing runs
 
 Runs go to <out>/<study>/<condition>-s<seed>/, each the folder train.py writes. A finished run
@@ -25,14 +27,14 @@ import os
 import sys
 from pathlib import Path
 
-from hexa_mjx import training
+from hexa_mjx import checkpoints, config, jax_setup, tasks, training
 
-STUDIES = ("main", "ablation", "lr")
+STUDIES = ("main", "ablation", "lr", "navigate")
 MAIN_REWARDS = ("goal_directed", "forward_motion")
 ABLATION_CONDITIONS = {"full": [], "no_contact": ["contact"], "no_height": ["height"],
                        "no_stability": ["stability"], "no_velocity": ["velocity"]}
 LEARNING_RATES = (1e-4, 3e-4, 1e-3)
-DEFAULT_SEEDS = {"main": 5, "ablation": 1, "lr": 2}
+DEFAULT_SEEDS = {"main": 5, "ablation": 1, "lr": 2, "navigate": 3}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -40,19 +42,28 @@ class Run:
     study: str
     condition: str
     seed: int
-    config: training.TrainConfig
+    config: config.TrainConfig
 
 
 def grid(study: str, out: Path, timesteps: int = 2_000_000, seeds: int | None = None,
-         num_envs: int = 256, **common) -> list[Run]:
-    """The runs of one study (report sections 4.2 to 4.4); `common` sets other TrainConfig fields of every run."""
+         num_envs: int = 256, task: str = "goal", **common) -> list[Run]:
+    """The runs of one study (report sections 4.2 to 4.4, or the navigation task's seeds) on `task`;
+    `common` sets other TrainConfig fields of every run. A study on another task than the report's
+    goes to <out>/<study>-<task>/."""
     if study not in STUDIES:
         raise ValueError(f"unknown study {study!r}; choose one of {STUDIES}")
+    if study == "navigate":
+        study, task = "seeds", "navigate"
+    elif study == "main" and task != "goal":
+        raise ValueError("the main study compares the report task's two rewards; run it without --task")
+    folder = study if task == "goal" else f"{study}-{task}"
     seeds = DEFAULT_SEEDS[study] if seeds is None else seeds
     if seeds < 1:
         raise ValueError(f"--seeds must be at least 1, got {seeds}")
     if study == "main":
         conditions = {reward: {"reward": reward} for reward in MAIN_REWARDS}
+    elif study == "seeds":
+        conditions = {"navigate": {}}
     elif study == "ablation":
         conditions = {name: {"ablate": ablate} for name, ablate in ABLATION_CONDITIONS.items()}
     else:
@@ -60,16 +71,17 @@ def grid(study: str, out: Path, timesteps: int = 2_000_000, seeds: int | None = 
     runs = []
     for condition, settings in conditions.items():
         for seed in range(seeds):
-            run_dir = Path(out) / study / f"{condition}-s{seed}"
-            cfg = training.TrainConfig(num_envs=num_envs, num_timesteps=timesteps, seed=seed,
-                                       run_dir=str(run_dir), **common, **settings)
+            run_dir = Path(out) / folder / f"{condition}-s{seed}"
+            cfg = config.TrainConfig(num_envs=num_envs, num_timesteps=timesteps, seed=seed, task=task,
+                                     run_dir=str(run_dir), **common, **settings)
+            cfg = dataclasses.replace(cfg, reward=cfg.reward or tasks.task_class(task).rewards[0])
             runs.append(Run(study, condition, seed, cfg))
     return runs
 
 
 def _finished(run_dir: Path, budget: int) -> bool:
     """Whether the run in `run_dir` has a checkpoint at or past `budget` steps."""
-    found = training.list_checkpoints(run_dir)
+    found = checkpoints.list_checkpoints(run_dir)
     return bool(found) and found[-1][0] >= budget
 
 
@@ -87,11 +99,11 @@ def finished_twin(run: Run) -> Path | None:
     study's 3e-4 are the same training at the same budget, and training is deterministic)."""
     run_dir = Path(run.config.run_dir)
     same = dataclasses.replace(run.config, run_dir="", resume=False)
-    for config in sorted(run_dir.parent.parent.glob("*/*/config.json")):
-        other = config.parent
+    for saved_config in sorted(run_dir.parent.parent.glob("*/*/config.json")):
+        other = saved_config.parent
         if other == run_dir or other.is_symlink():
             continue
-        saved = dataclasses.replace(training.load_config(other), run_dir="", resume=False)
+        saved = dataclasses.replace(config.load_config(other), run_dir="", resume=False)
         if saved == same and _finished(other, run.config.num_timesteps):
             return other
     return None
@@ -233,6 +245,16 @@ def plot_figures(runs: list[dict], out: Path) -> list[Path]:
             ax.set_ylabel("distance to goal (m)")
             ax.legend()
             save(fig, name)
+    navigation = [r for r in runs if r["study"].endswith("-navigate")]
+    if navigation:
+        fig, axes = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
+        label_of = lambda r: f"{r['study']}/{r['condition']}"  # noqa: E731
+        _curves(axes[0], navigation, "goals_per_episode", label_of)
+        axes[0].set_ylabel("goals reached per episode")
+        _curves(axes[1], navigation, "fall_rate", label_of)
+        axes[1].set_ylabel("fall rate")
+        axes[0].legend()
+        save(fig, "fig5_navigate.png")
     return written
 
 
@@ -248,19 +270,21 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m hexa_mjx.experiments", description=__doc__.split("\n\n")[0])
     parser.add_argument("study", choices=[*STUDIES, "aggregate"], help="which study to run, or aggregate only")
     parser.add_argument("--timesteps", type=int, default=2_000_000, help="env steps per run (default: 2M)")
-    parser.add_argument("--seeds", type=int, default=None, help="seeds per condition (default: main 5, ablation 1, lr 2)")
+    parser.add_argument("--seeds", type=int, default=None, help="seeds per condition (default: main 5, ablation 1, lr 2, navigate 3)")
     parser.add_argument("--num_envs", type=int, default=256, help="environments per run (default: 256)")
     parser.add_argument("--out", type=Path, default=Path("experiments"), help="output folder (default: experiments)")
+    parser.add_argument("--task", default="goal", choices=sorted(tasks.TASKS),
+                        help="the task every run trains on (default: goal, the report's)")
     parser.add_argument("--max_contact_points", type=int, default=0,
                         help="MJX keeps only this many deepest robot-floor contact points per step (default 0: all)")
     args = parser.parse_args(argv)
     try:
         if args.study != "aggregate":
-            training.prepare_jax()  # before anything starts JAX: one device per core
-            runs = grid(args.study, args.out, args.timesteps, args.seeds, args.num_envs,
+            jax_setup.prepare_jax()  # before anything starts JAX: one device per core
+            runs = grid(args.study, args.out, args.timesteps, args.seeds, args.num_envs, task=args.task,
                         max_contact_points=args.max_contact_points)
             for run in runs:  # every run's settings are checked before the first one compiles
-                training.validate(dataclasses.replace(run.config, resume=status(run) != "new"))
+                config.validate(dataclasses.replace(run.config, resume=status(run) != "new"))
             print(run_study(runs))
         paths = aggregate(args.out)
     except (ValueError, FileNotFoundError) as e:

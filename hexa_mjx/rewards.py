@@ -15,6 +15,11 @@ def goal_approach(prev_dist, dist):
     return prev_dist - dist
 
 
+def goal_reached(completed):
+    """1 on the step a goal is completed (navigation: the next goal is drawn then)."""
+    return completed.astype(jp.float32)
+
+
 def velocity_alignment(vel_xy, goal_dir_xy):
     """|v| * (v_hat . g_hat) = planar speed toward the goal, m/s."""
     return jp.dot(vel_xy, goal_dir_xy)
@@ -67,7 +72,7 @@ def forward_velocity(vel_xy):
 
 TERMS = {
     f.__name__: f
-    for f in (goal_approach, velocity_alignment, goal_bonus, stability, height, energy, contact_quality,
+    for f in (goal_approach, goal_reached, velocity_alignment, goal_bonus, stability, height, energy, contact_quality,
               body_contact, termination, forward_progress, forward_velocity)
 }
 
@@ -84,6 +89,10 @@ VARIANTS: dict[str, dict[str, float]] = {
     # Report section 3.2: approach the goal.
     "goal_directed": {"goal_approach": 1000.0, "velocity_alignment": 5.0, "goal_bonus": 100.0,
                       "forward_progress": 0.0, "forward_velocity": 0.0, **_SHAPING},
+    # Navigation: the report's goal terms toward the current goal, whose radius it leaves at once
+    # (so the in-radius bonus is paid on the arrival step), plus a one-off bonus per goal reached.
+    "navigate": {"goal_approach": 1000.0, "velocity_alignment": 5.0, "goal_bonus": 100.0, "goal_reached": 400.0,
+                 **_SHAPING},
     # Report section 4.2 baseline: move along +x, no goal bonus.
     "forward_motion": {"goal_approach": 0.0, "velocity_alignment": 0.0, "goal_bonus": 0.0,
                        "forward_progress": 1000.0, "forward_velocity": 5.0, **_SHAPING},

@@ -19,3 +19,18 @@ def step(env):
 @pytest.fixture(scope="session")
 def state0(env):
     return jax.jit(env.reset)(jax.random.PRNGKey(0))
+
+
+@pytest.fixture(scope="session")
+def nav_env():
+    return hexa_mjx.make_env(task="navigate")
+
+
+@pytest.fixture(scope="session")
+def nav_step(nav_env):
+    return jax.jit(nav_env.step)
+
+
+@pytest.fixture(scope="session")
+def nav_reset(nav_env):
+    return jax.jit(jax.vmap(nav_env.reset))

@@ -120,10 +120,11 @@ def test_contact_quality_when_leg_links_touch_with_feet_lifted(env, counts_at):
 
 def test_goal_bonus_is_paid_only_on_feet(env, state0):
     # At the goal (distance 0): standing earns the bonus, lying on the back does not.
+    state0 = state0.replace(pipeline_state=env.set_goal(state0.pipeline_state, jp.zeros(2)))
     def bonus(qpos):
         data = mjx.forward(env.mjx_model, state0.pipeline_state.replace(qpos=qpos))
-        zero = jp.zeros(())
-        return env._terms(data, data, zero > 0, zero, zero, zero)["goal_bonus"]
+        no = jp.zeros((), bool)
+        return env.reward_terms(data, data, no, no)["goal_bonus"]
     bonus = jax.jit(bonus)
     lying = np.array(env.mj_model.key_qpos[0])
     lying[2], lying[3:7] = 0.0, FLIPPED
@@ -245,9 +246,11 @@ def test_start_noise_is_drawn_per_reset(env, state0):
 
 
 def test_every_variant_and_ablation_builds():
-    for reward in rewards.VARIANTS:
+    variants = [(task, reward) for task, cls in hexa_mjx.TASKS.items() for reward in cls.rewards]
+    assert sorted(r for _, r in variants) == sorted(rewards.VARIANTS)  # every variant belongs to a task
+    for task, reward in variants:
         for ablation in [None, *rewards.ABLATIONS]:
-            env = hexa_mjx.make_env(reward, ablate=() if ablation is None else ablation)
+            env = hexa_mjx.make_env(reward, task, ablate=() if ablation is None else ablation)
             active = {t for t, s in env.scales.items() if s}
             dropped = set(rewards.ABLATIONS.get(ablation, ()))
             assert not active & dropped
@@ -265,7 +268,7 @@ def test_forward_motion_logs_its_own_terms():
 
 
 def test_bad_settings_give_clear_errors():
-    with pytest.raises(ValueError, match="unknown reward 'fast'"):
+    with pytest.raises(ValueError, match="unknown reward 'fast'; the goal task's are"):
         hexa_mjx.make_env("fast")
     with pytest.raises(TypeError, match=r"unknown environment setting\(s\) \['ctrl_rate'\]"):
         hexa_mjx.make_env(ctrl_rate=50)

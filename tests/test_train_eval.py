@@ -14,7 +14,7 @@ import jax
 import numpy as np
 import pytest
 
-from hexa_mjx import evaluation, training
+from hexa_mjx import checkpoints, config, evaluation, training
 
 ROOT = Path(__file__).resolve().parent.parent
 # A tiny rollout shape: 8 envs x 4 steps x 2 minibatches = 64 env steps per update.
@@ -56,9 +56,12 @@ def test_train_writes_run_directory(trained):
     run_dir, proc = trained
     assert [r["step"] for r in rows(run_dir)] == [0, 64]
     assert {"episode_return", "final_distance", "success_rate", "goal_bonus", "fall_rate"} <= set(rows(run_dir)[-1])
-    assert [step for step, _ in training.list_checkpoints(run_dir)] == [64]
+    assert [step for step, _ in checkpoints.list_checkpoints(run_dir)] == [64]
     assert list((run_dir / "tb").glob("events.out.tfevents.*"))
     assert "success" in proc.stdout and "steps/s" in proc.stdout and "done:" in proc.stdout
+    # Compiling is announced, and its end (the first training update) reported.
+    assert "compiling the environment and evaluation programs" in proc.stdout
+    assert re.search(r"training compiled and its first update ran in \d+ s", proc.stdout)
     # One CPU device per core, as many as divide the 8 envs and the batch of 8.
     devices = max(d for d in range(1, len(os.sched_getaffinity(0)) + 1) if 8 % d == 0)
     assert f"on 8 envs ({devices} cpu device" in proc.stdout
@@ -66,8 +69,8 @@ def test_train_writes_run_directory(trained):
 
 def test_saved_config_round_trips(trained):
     run_dir, _ = trained
-    saved = training.load_config(run_dir)
-    flags = training.parse_args([*TINY, *NOISE, "--num_timesteps", "64", "--seed", "3", "--run_dir", str(run_dir)])
+    saved = config.load_config(run_dir)
+    flags = config.parse_args([*TINY, *NOISE, "--num_timesteps", "64", "--seed", "3", "--run_dir", str(run_dir)])
     assert saved == flags and saved.start_yaw_noise == 0.1
     assert saved.seed == 3 and saved.hidden == [256, 256] and saved.discount == 0.99
 
@@ -82,31 +85,31 @@ def test_resume_continues_step_count(trained, cache_env, tmp_path):
                "--resume", env=cache_env)
     assert "resuming" in proc.stdout and "from step 64" in proc.stdout
     assert [r["step"] for r in rows(resumed)] == [0, 64, 128]
-    assert [step for step, _ in training.list_checkpoints(resumed)] == [64, 128]
+    assert [step for step, _ in checkpoints.list_checkpoints(resumed)] == [64, 128]
 
 
 def test_runs_from_before_a_new_setting_resume(tmp_path):
     """A config.json written before a setting existed reads as that setting's default."""
-    cfg = training.validate(training.TrainConfig(run_dir=str(tmp_path / "old")))
+    cfg = config.validate(config.TrainConfig(run_dir=str(tmp_path / "old")))
     old = dataclasses.asdict(cfg)
     del old["start_joint_noise"], old["start_yaw_noise"]
     (tmp_path / "old" / "config.json").parent.mkdir()
     (tmp_path / "old" / "config.json").write_text(json.dumps(old))
-    training.validate(dataclasses.replace(cfg, resume=True))
-    with pytest.raises(training.ConfigError, match="holds a different run: start_yaw_noise=0.0"):
-        training.validate(dataclasses.replace(cfg, resume=True, start_yaw_noise=0.2))
+    config.validate(dataclasses.replace(cfg, resume=True))
+    with pytest.raises(config.ConfigError, match="holds a different run: start_yaw_noise=0.0"):
+        config.validate(dataclasses.replace(cfg, resume=True, start_yaw_noise=0.2))
 
 
 def test_resumed_run_keeps_its_evaluation_spacing():
-    cfg = training.TrainConfig(num_timesteps=2_000_000, num_evals=10)
+    cfg = config.TrainConfig(num_timesteps=2_000_000, num_evals=10)
     assert training.evals_for(cfg, 2_000_000) == 10  # a fresh run: as asked
     assert training.evals_for(cfg, 1_000_000) == 6  # half the run left: about half the evaluations
     assert training.evals_for(cfg, 10_000) == 2  # the initial one and one at the end
 
 
 def test_checkpoint_restores_same_actions(tmp_path):
-    cfg = training.TrainConfig(hidden=[32, 32])
-    env = training.make_env_for(cfg)
+    cfg = config.TrainConfig(hidden=[32, 32])
+    env = config.make_env_for(cfg)
     normalizer, policy, value = training.init_params(cfg, env)
     key = jax.random.PRNGKey(7)
     # Non-trivial normalizer statistics, so a normalizer lost in saving would change the actions.
@@ -115,8 +118,8 @@ def test_checkpoint_restores_same_actions(tmp_path):
     params = (normalizer, policy, value)
     obs = jax.random.normal(jax.random.PRNGKey(1), (5, env.observation_size))
     before = training.make_inference(cfg, env, params)(obs, key)
-    path = training.save_checkpoint(tmp_path, 1234, params)
-    step, restored = training.load_checkpoint(path, training.init_params(cfg, env))
+    path = checkpoints.save_checkpoint(tmp_path, 1234, params)
+    step, restored = checkpoints.load_checkpoint(path, training.init_params(cfg, env))
     after = training.make_inference(cfg, env, restored)(obs, key)
     assert step == 1234
     np.testing.assert_array_equal(np.asarray(before), np.asarray(after))
@@ -212,7 +215,7 @@ def test_eval_rejects_corrupted_checkpoint(trained, tmp_path):
     run_dir, _ = trained
     broken = tmp_path / "broken"
     subprocess.run(["cp", "-r", str(run_dir), str(broken)], check=True)
-    (ckpt,) = [p for _, p in training.list_checkpoints(broken)]
+    (ckpt,) = [p for _, p in checkpoints.list_checkpoints(broken)]
     for f in (ckpt / "params").rglob("*"):
         if f.is_file():
             f.write_bytes(b"garbage")
@@ -225,4 +228,4 @@ def test_eval_rejects_corrupted_checkpoint(trained, tmp_path):
 def test_missing_opengl_names_the_package(env, monkeypatch, tmp_path):
     monkeypatch.delenv("MUJOCO_GL", raising=False)
     with pytest.raises(RuntimeError, match="apt-get install libegl1 libegl-mesa0 libosmesa6"):
-        evaluation.render_video(env, np.zeros((2, env.mj_model.nq)), tmp_path / "x.mp4")
+        evaluation.render_video(env, np.zeros((2, env.mj_model.nq)), tmp_path / "x.mp4", np.zeros((2, 2)))

@@ -58,7 +58,9 @@ def test_every_episode_starts_from_a_fresh_draw():
 
 
 def test_zero_noise_uses_brax_wrappers():
+    import hexa_mjx
     from hexa_mjx import training
 
-    assert training.wrap_env_fn(training.TrainConfig()) is None
-    assert training.wrap_env_fn(training.TrainConfig(start_yaw_noise=0.1)) is wrappers.wrap_for_training
+    assert training.wrap_env_fn(hexa_mjx.make_env()) is None  # the report's fixed start
+    assert training.wrap_env_fn(hexa_mjx.make_env(start_yaw_noise=0.1)) is wrappers.wrap_for_training
+    assert training.wrap_env_fn(hexa_mjx.make_env(task="navigate")) is wrappers.wrap_for_training  # random headings

@@ -1,0 +1,73 @@
+"""Checkpoints: atomic orbax folders of (normalizer, policy, value) params, one per evaluation.
+
+`<run>/checkpoints/<step:012d>/` holds `params/` (orbax) and `step.json`; each is written to a
+temporary folder and renamed when complete, so a crash leaves the last complete one readable.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+from pathlib import Path
+
+import jax
+
+
+def checkpoint_dir(run_dir: Path) -> Path:
+    return Path(run_dir) / "checkpoints"
+
+
+def list_checkpoints(run_dir: Path) -> list[tuple[int, Path]]:
+    """Complete checkpoints of a run, oldest first (temporary, half-written ones are ignored)."""
+    root = checkpoint_dir(run_dir)
+    if not root.is_dir():
+        return []
+    found = [(int(p.name), p) for p in root.iterdir() if re.fullmatch(r"\d{12}", p.name) and p.is_dir()]
+    return sorted(found)
+
+
+def save_checkpoint(run_dir: Path, step: int, params) -> Path:
+    """Write params for `step` atomically: into a temporary folder, renamed when complete."""
+    import orbax.checkpoint as ocp
+
+    root = checkpoint_dir(run_dir)
+    root.mkdir(parents=True, exist_ok=True)
+    final, tmp = root / f"{step:012d}", root / f"tmp-{step:012d}-{os.getpid()}"
+    shutil.rmtree(tmp, ignore_errors=True)
+    checkpointer = ocp.StandardCheckpointer()
+    checkpointer.save(tmp.resolve() / "params", jax.device_get(params))
+    checkpointer.wait_until_finished()
+    (tmp / "step.json").write_text(json.dumps({"step": step}))
+    if final.exists():
+        shutil.rmtree(final)
+    tmp.rename(final)
+    return final
+
+
+def load_checkpoint(path: Path, template):
+    """Restore (normalizer, policy, value) params saved by save_checkpoint into `template`'s structure."""
+    import orbax.checkpoint as ocp
+
+    path = Path(path)
+    try:
+        step = json.loads((path / "step.json").read_text())["step"]
+        params = ocp.StandardCheckpointer().restore((path / "params").resolve(), template)
+    except Exception as e:  # orbax raises many kinds; all mean the same to a user
+        raise RuntimeError(f"checkpoint {path} is unreadable ({type(e).__name__}: {str(e)[:200]}); "
+                           f"use an earlier checkpoint in {path.parent}") from e
+    return step, params
+
+
+def resolve_checkpoint(path: Path) -> tuple[Path, Path]:
+    """(run dir, checkpoint dir) for a run directory (its latest checkpoint) or one checkpoint."""
+    path = Path(path)
+    if (path / "step.json").is_file():
+        return path.parent.parent, path
+    if (path / "config.json").is_file():
+        found = list_checkpoints(path)
+        if not found:
+            raise FileNotFoundError(f"run {path} has no complete checkpoint yet")
+        return path, found[-1][1]
+    raise FileNotFoundError(f"{path} is neither a run directory (with config.json) nor a checkpoint folder")

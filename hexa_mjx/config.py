@@ -1,0 +1,204 @@
+"""Training configuration: the typed config whose fields are train.py's flags, presets, validation.
+
+Everything here runs before anything is compiled, so bad input fails in a second with one line.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+from pathlib import Path
+from typing import Any
+
+import jax
+
+from hexa_mjx import rewards
+from hexa_mjx.jax_setup import devices_for
+from hexa_mjx.tasks import TASKS, make_env, task_class
+
+
+@dataclasses.dataclass
+class TrainConfig:
+    """PPO on the hexapod. Defaults follow the report's Table 1 except the rollout shape."""
+
+    num_envs: int = dataclasses.field(default=256, metadata={"help": "parallel environments"})
+    num_timesteps: int = dataclasses.field(default=2_000_000, metadata={"help": "environment steps in total"})
+    seed: int = dataclasses.field(default=0, metadata={"help": "random seed"})
+    lr: float = dataclasses.field(default=3e-4, metadata={"help": "Adam learning rate"})
+    task: str = dataclasses.field(default="goal", metadata={
+        "help": "'goal': the report's task (one goal 1.5 m ahead); 'navigate': goals in every direction",
+        "choices": sorted(TASKS)})
+    reward: str = dataclasses.field(default="", metadata={
+        "help": "reward variant of the task (default: the task's own: goal_directed, navigate)",
+        "choices": sorted(rewards.VARIANTS)})
+    ablate: list = dataclasses.field(default_factory=list, metadata={
+        "help": "reward ablations (any of these, space-separated)", "choices": sorted(rewards.ABLATIONS),
+        "nargs": "*"})
+    ctrl_hz: float = dataclasses.field(default=60.0, metadata={"help": "control rate, Hz (240 / whole number)"})
+    run_dir: str = dataclasses.field(default="", metadata={
+        "help": "run directory (default runs/<reward>[-no_<ablation>]-s<seed>)"})
+    num_evals: int = dataclasses.field(default=10, metadata={"help": "evaluations (and checkpoints) over the run"})
+    resume: bool = dataclasses.field(default=False, metadata={"help": "continue the run in --run_dir"})
+    preset: str = dataclasses.field(default="", metadata={
+        "help": "named rollout shape: 'paper' = the report's 8 envs x 2048 steps, minibatch 64",
+        "choices": ["paper"]})
+    # Rollout shape: brax collects batch_size * num_minibatches trajectories of unroll_length steps
+    # per update (here 16 * 32 * 32 = 16384 = the report's 8 x 2048) and splits them into
+    # num_minibatches minibatches of batch_size * unroll_length samples.
+    unroll_length: int = dataclasses.field(default=32, metadata={"help": "steps per trajectory segment"})
+    batch_size: int = dataclasses.field(default=16, metadata={"help": "trajectory segments per minibatch"})
+    num_minibatches: int = dataclasses.field(default=32, metadata={"help": "minibatches per update epoch"})
+    update_epochs: int = dataclasses.field(default=10, metadata={"help": "passes over each rollout"})
+    discount: float = dataclasses.field(default=0.99, metadata={"help": "discount factor gamma"})
+    gae_lambda: float = dataclasses.field(default=0.95, metadata={"help": "GAE lambda"})
+    clip: float = dataclasses.field(default=0.2, metadata={"help": "PPO clip range"})
+    vf_coef: float = dataclasses.field(default=0.5, metadata={"help": "value-loss coefficient"})
+    ent_coef: float = dataclasses.field(default=0.0, metadata={"help": "entropy coefficient"})
+    max_grad_norm: float = dataclasses.field(default=0.5, metadata={"help": "gradient clipping norm"})
+    hidden: list = dataclasses.field(default_factory=lambda: [256, 256], metadata={
+        "help": "hidden layer sizes of actor and critic", "nargs": "+", "type": int})
+    reward_scaling: float = dataclasses.field(default=0.01, metadata={
+        "help": "constant reward factor (stands in for the report's reward normalization)"})
+    policy_dist: str = dataclasses.field(default="normal", metadata={
+        "help": "action distribution: 'normal' (CleanRL's Gaussian, clipped by the env) or brax's 'tanh_normal'",
+        "choices": ["normal", "tanh_normal"]})
+    mean_init_scale: float = dataclasses.field(default=0.01, metadata={
+        "help": "init scale of the policy mean's output layer (CleanRL: 0.01, so early actions are near 0)"})
+    episode_length: int = dataclasses.field(default=1000, metadata={"help": "control steps per episode"})
+    start_joint_noise: float = dataclasses.field(default=0.0, metadata={
+        "help": "rad, uniform noise on each joint's start angle, drawn per episode (0: the report's fixed start)"})
+    start_yaw_noise: float = dataclasses.field(default=0.0, metadata={
+        "help": "rad, uniform noise on the start heading, drawn per episode"})
+    goal_min_distance: float = dataclasses.field(default=0.5, metadata={
+        "help": "navigate: m, nearest goal distance drawn"})
+    goal_max_distance: float = dataclasses.field(default=3.0, metadata={
+        "help": "navigate: m, farthest goal distance drawn"})
+    max_contact_points: int = dataclasses.field(default=0, metadata={
+        "help": "MJX keeps only this many deepest robot-floor contacts per step (0: all 40 slots)"})
+    num_eval_envs: int = dataclasses.field(default=32, metadata={
+        "help": "episodes per evaluation (deterministic policy)"})
+    compile_cache: bool = dataclasses.field(default=True, metadata={
+        "help": "keep compiled programs in a per-user cache folder (--no_compile_cache: off)"})
+    progress: bool = dataclasses.field(default=True, metadata={
+        "help": "a console line every 15 s between evaluations (--no_progress: off)"})
+    cpu_devices: int = dataclasses.field(default=0, metadata={
+        "help": "on the CPU: XLA host devices that split environments and minibatches, one core each "
+                "(0: one per core, as many as divide num_envs and batch_size; 1: a single device)"})
+
+    @property
+    def steps_per_update(self) -> int:
+        return self.batch_size * self.num_minibatches * self.unroll_length
+
+
+PRESETS: dict[str, dict[str, Any]] = {
+    # The report: 8 envs x 2048 steps per rollout, minibatch 64. brax's minibatches are made of
+    # whole trajectory segments, so 64-sample minibatches need 8-step segments: 8 envs each run
+    # 256 segments of 8 steps (= 2048 steps) per update, split into 256 minibatches of 8 x 8.
+    "paper": {"num_envs": 8, "unroll_length": 8, "batch_size": 8, "num_minibatches": 256},
+}
+
+# Settings that may change on --resume without making it a different run.
+RESUMABLE = {"num_timesteps", "num_evals", "resume", "run_dir", "cpu_devices", "compile_cache", "progress"}
+
+
+class ConfigError(ValueError):
+    """Bad command-line input, found before anything is compiled."""
+
+
+def parse_args(argv=None) -> TrainConfig:
+    """Flags from TrainConfig's fields; a preset fills fields the command line leaves unset."""
+    parser = argparse.ArgumentParser(prog="train.py", description=TrainConfig.__doc__,
+                                     argument_default=argparse.SUPPRESS)
+    for f in dataclasses.fields(TrainConfig):
+        meta = dict(f.metadata)
+        default = f.default_factory() if f.default_factory is not dataclasses.MISSING else f.default
+        meta["help"] = f"{meta['help']} (default: {default})"
+        if f.type == "bool" and default:
+            parser.add_argument(f"--no_{f.name}", dest=f.name, action="store_false", **meta)
+        elif f.type == "bool":
+            parser.add_argument(f"--{f.name}", action="store_true", **meta)
+        else:
+            kind = meta.pop("type", None) or {"int": int, "float": float, "str": str, "list": str}[f.type]
+            parser.add_argument(f"--{f.name}", type=kind, **meta)
+    explicit = vars(parser.parse_args(argv))
+    preset = PRESETS.get(explicit.get("preset", ""), {})
+    cfg = dataclasses.replace(TrainConfig(), **{**preset, **explicit})
+    return dataclasses.replace(cfg, reward=cfg.reward or task_class(cfg.task).rewards[0])
+
+
+def default_run_dir(cfg: TrainConfig) -> Path:
+    ablations = "".join(f"-no_{a}" for a in sorted(cfg.ablate))
+    return Path("runs") / f"{cfg.reward}{ablations}-s{cfg.seed}"
+
+
+
+def validate(cfg: TrainConfig) -> TrainConfig:
+    """Fail fast, before any compile, on settings that cannot work; returns cfg with reward and run_dir set."""
+    cfg = dataclasses.replace(cfg, reward=cfg.reward or task_class(cfg.task).rewards[0])
+    rewards.make_scales(cfg.reward, cfg.ablate)  # unknown names raise ValueError
+    trajectories = cfg.batch_size * cfg.num_minibatches
+    if cfg.num_envs < 1 or trajectories % cfg.num_envs:
+        fits = [n for n in (8, 16, 32, 64, 128, 256, 512, 1024, 2048, 4096) if trajectories % n == 0]
+        raise ConfigError(
+            f"--num_envs {cfg.num_envs} does not fit the batch shape: batch_size x num_minibatches = "
+            f"{cfg.batch_size} x {cfg.num_minibatches} = {trajectories} trajectory segments per update must be "
+            f"a multiple of num_envs. Use one of {fits}, or change --batch_size/--num_minibatches.")
+    if cfg.cpu_devices < 0:
+        raise ConfigError(f"--cpu_devices must be 0 (one per core) or more, got {cfg.cpu_devices}")
+    devices = devices_for(cfg)
+    if jax.default_backend() == "cpu" and devices > jax.local_device_count():
+        raise ConfigError(f"--cpu_devices {devices} but JAX has {jax.local_device_count()} CPU devices: it had "
+                          "started before train() could ask for more; use train.py, or call "
+                          "hexa_mjx.jax_setup.prepare_jax() before anything else touches JAX")
+    if cfg.num_envs % devices or cfg.batch_size % devices:
+        raise ConfigError(f"{devices} devices must divide --num_envs ({cfg.num_envs}) and --batch_size "
+                          f"({cfg.batch_size}); change them or --cpu_devices")
+    for name in ("num_timesteps", "num_evals", "unroll_length", "update_epochs", "episode_length", "num_eval_envs"):
+        if getattr(cfg, name) < 1:
+            raise ConfigError(f"--{name} must be at least 1, got {getattr(cfg, name)}")
+    run_dir = Path(cfg.run_dir) if cfg.run_dir else default_run_dir(cfg)
+    cfg = dataclasses.replace(cfg, run_dir=str(run_dir))
+    saved = run_dir / "config.json"
+    if saved.is_file():
+        if not cfg.resume:
+            raise ConfigError(f"{run_dir} already holds a run; pass --resume to continue it, "
+                              "or choose another --run_dir")
+        # A setting added after the run was made has its default there.
+        old = {**dataclasses.asdict(TrainConfig()), **json.loads(saved.read_text())}
+        changed = sorted(k for k, v in dataclasses.asdict(cfg).items()
+                         if k not in RESUMABLE and old.get(k) != v)
+        if changed:
+            raise ConfigError(f"{run_dir} holds a different run: {', '.join(f'{k}={old.get(k)!r}' for k in changed)}"
+                              f" there; resume with the same settings or choose another --run_dir")
+    elif cfg.resume and run_dir.exists() and any(run_dir.iterdir()):
+        raise ConfigError(f"{run_dir} has no config.json, so it is not a run this tool can resume")
+    make_env_for(cfg)  # a bad ctrl_hz, task or reward raises here, before compiling
+    return cfg
+
+
+def load_config(run_dir: Path) -> TrainConfig:
+    data = json.loads((Path(run_dir) / "config.json").read_text())
+    known = {f.name for f in dataclasses.fields(TrainConfig)}
+    # Runs made before tasks existed are the report's task ("goal", the default).
+    return TrainConfig(**{k: v for k, v in data.items() if k in known})
+
+
+def make_env_for(cfg: TrainConfig, task: str = "", **overrides):
+    """The run's environment; keyword overrides set `EnvConfig` fields (eval's start noise, contact cap).
+
+    `task` runs the run's policy on another task's goals, which works only where the policy's
+    observation can be computed there: a report-task policy on the navigation task's goals.
+    """
+    if task and task != cfg.task:
+        if (cfg.task, task) != ("goal", "navigate"):
+            raise ValueError(f"this is a {cfg.task} policy; it cannot be run on the {task} task (its observation "
+                             f"is the {cfg.task} task's). Evaluate it on its own task")
+        task_settings = dict(goal_min_distance=cfg.goal_min_distance, goal_max_distance=cfg.goal_max_distance)
+        return make_env("", task, observe_as=cfg.task, ctrl_hz=cfg.ctrl_hz, episode_length=cfg.episode_length,
+                        max_contact_points=cfg.max_contact_points, **{**task_settings, **overrides})
+    settings = dict(ablate=tuple(cfg.ablate), ctrl_hz=cfg.ctrl_hz, episode_length=cfg.episode_length,
+                    start_joint_noise=cfg.start_joint_noise, start_yaw_noise=cfg.start_yaw_noise,
+                    max_contact_points=cfg.max_contact_points, goal_min_distance=cfg.goal_min_distance,
+                    goal_max_distance=cfg.goal_max_distance, goal_distance_cap=cfg.goal_max_distance)
+    return make_env(cfg.reward, cfg.task, **{**settings, **overrides})

@@ -1,0 +1,107 @@
+"""What a training run tells its user: metrics.jsonl rows, TensorBoard scalars, console lines."""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from hexa_mjx.config import TrainConfig
+
+PROGRESS_INTERVAL_S = 15.0  # at most this long without a console line while training
+
+def summarize(metrics: dict) -> dict:
+    """The figures a user watches, from brax's eval metrics (per-episode sums, averaged)."""
+    get = lambda k: float(metrics.get(f"eval/episode_{k}", math.nan))  # noqa: E731
+    return {
+        "episode_return": get("reward"),
+        "final_distance": get("final_distance"),
+        "success_rate": get("final_success"),
+        "goal_bonus": get("goal_bonus"),
+        "fall_rate": get("fell"),
+        "nonfinite_rate": get("nonfinite"),
+        "goals_per_episode": get("goals_reached"),
+        "episode_length": float(metrics.get("eval/avg_episode_length", math.nan)),
+    }
+
+
+class Logger:
+    """metrics.jsonl rows, TensorBoard scalars and one console line per evaluation; between
+    evaluations a progress line at least every PROGRESS_INTERVAL_S, and lines that say when the
+    programs are compiling."""
+
+    def __init__(self, run_dir: Path, cfg: TrainConfig, start_step: int, interval_s: float = PROGRESS_INTERVAL_S):
+        from tensorboardX import SummaryWriter
+
+        self.path = Path(run_dir) / "metrics.jsonl"
+        self.tb = SummaryWriter(str(Path(run_dir) / "tb"))
+        self.cfg, self.start_step, self.t0 = cfg, start_step, time.time()
+        self.interval_s = interval_s
+        self.last = {}
+        self.phase, self.phase_t0 = "", self.t0
+        self.last_line_t, self.last_line_step = self.t0, start_step
+        self.first_update_s = None
+
+    def compiling(self) -> None:
+        """Say that the evaluation and training programs are being compiled (or loaded from cache)."""
+        self.phase, self.phase_t0 = "evaluation", time.time()
+        print("compiling the environment and evaluation programs (1-3 min on a 2-core CPU the first time; "
+              "seconds when the compile cache has them) ...", flush=True)
+
+    def progress(self, step: int, metrics: dict) -> None:
+        """A training-batch report from brax (every update): print a line every `interval_s`."""
+        now = time.time()
+        if self.phase == "training":
+            self.first_update_s = now - self.phase_t0
+            print(f"training compiled and its first update ran in {self.first_update_s:.0f} s "
+                  f"({now - self.t0:.0f} s since the start)", flush=True)
+            self.phase = ""
+            self.last_line_t, self.last_line_step = now, step
+            return
+        if now - self.last_line_t < self.interval_s:
+            return
+        rate = (step - self.last_line_step) / (now - self.last_line_t)
+        left = max(self.cfg.num_timesteps - step, 0) / rate if rate > 0 else math.nan
+        ret = float(metrics.get("episode/sum_reward", math.nan))
+        print(f"  step {step:>9,}/{self.cfg.num_timesteps:,}  {rate:7.0f} steps/s  left {fmt_time(left)}  "
+              f"training episodes' return {ret:8.1f}", flush=True)
+        self.last_line_t, self.last_line_step = now, step
+
+    def __call__(self, step: int, metrics: dict) -> None:
+        elapsed = time.time() - self.t0
+        done = step - self.start_step
+        rate = done / elapsed if done > 0 and elapsed > 0 else math.nan
+        row = {"step": step, "walltime_s": round(elapsed, 2), "env_steps_per_s": rate, **summarize(metrics),
+               **{k: float(v) for k, v in metrics.items() if k.startswith("eval/episode_reward/")}}
+        with open(self.path, "a") as f:
+            f.write(json.dumps(row) + "\n")
+        for key, value in row.items():
+            if key != "step" and isinstance(value, float) and math.isfinite(value):
+                self.tb.add_scalar(key.replace("eval/episode_", ""), value, step)
+        self.tb.flush()
+        now = time.time()
+        if self.phase == "evaluation":
+            print(f"evaluation compiled and run in {now - self.phase_t0:.0f} s; compiling the training "
+                  "programs ...", flush=True)
+            self.phase, self.phase_t0 = "training", now
+        self.last_line_t, self.last_line_step = now, step
+        left = max(self.cfg.num_timesteps - step, 0) / rate if math.isfinite(rate) and rate > 0 else math.nan
+        task_figure = (f"goals {row['goals_per_episode']:.2f}" if self.cfg.task == "navigate"
+                       else f"goal bonus {row['goal_bonus']:7.1f}")
+        print(f"step {step:>9,}/{self.cfg.num_timesteps:,}  {rate:7.0f} steps/s  left {fmt_time(left)}  "
+              f"return {row['episode_return']:8.1f}  distance {row['final_distance']:.2f} m  "
+              f"success {row['success_rate']:.0%}  {task_figure}  falls {row['fall_rate']:.0%}"
+              + (f"  non-finite {row['nonfinite_rate']:.0%}" if row["nonfinite_rate"] > 0 else ""), flush=True)
+        self.last = row
+
+    def close(self):
+        self.tb.close()
+
+
+def fmt_time(seconds: float) -> str:
+    if not math.isfinite(seconds):
+        return "  --:--"
+    return f"{int(seconds // 60):4d}:{int(seconds % 60):02d}"

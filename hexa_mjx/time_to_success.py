@@ -1,0 +1,132 @@
+"""Wall time to a good policy: train configurations side by side and time their first success.
+
+    python -m hexa_mjx.time_to_success --configs default fast --seeds 0 1 2 --out runs/tts
+
+Each run is a real `train.py` process (compile included, as a user sees it), given the same
+seeds; configurations take turns within each seed so that machine noise falls on all of them.
+A run stops (Ctrl-C, as a user would) at its first evaluation with success at or above
+`--target`, unless `--full` lets it finish its budget. It prints, per configuration and seed:
+wall time and env steps to that evaluation, the time to the first training update (compile),
+and a median-and-range summary. Everything is also written to `<out>/time_to_success.json`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import signal
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+# Configurations: train.py flags. "default" is train.py as it is; presets are named by train.py.
+CONFIGS = {
+    "default": [],
+    "paper": ["--preset", "paper"],
+    "fast": ["--preset", "fast"],
+}
+# Random starts, as the evaluations that decide success are meant to be (eval.py's perturbed starts).
+RANDOM_STARTS = ["--start_joint_noise", "0.1", "--start_yaw_noise", "0.3"]
+FIRST_UPDATE = re.compile(r"training compiled and its first update ran in (\d+) s \((\d+) s since the start\)")
+
+
+def parse_config(text: str) -> tuple[str, list[str]]:
+    """A configuration: a name from CONFIGS, or NAME=FLAGS (e.g. "e4=--update_epochs 4")."""
+    if "=" in text:
+        name, flags = text.split("=", 1)
+        return name, flags.split()
+    if text not in CONFIGS:
+        raise SystemExit(f"error: unknown configuration {text!r}; use one of {sorted(CONFIGS)} or NAME='--flag value ...'")
+    return text, CONFIGS[text]
+
+
+def first_success(metrics_path: Path, target: float):
+    """(step, walltime_s) of the first evaluation row with success_rate >= target, or None."""
+    if not metrics_path.is_file():
+        return None
+    for line in metrics_path.read_text().splitlines():
+        row = json.loads(line)
+        if row.get("success_rate", 0.0) >= target:
+            return row["step"], row["walltime_s"]
+    return None
+
+
+def run_one(flags: list[str], run_dir: Path, target: float, full: bool, timeout_s: float) -> dict:
+    """Train once in a subprocess; stop it at its first success unless `full`."""
+    cmd = [sys.executable, str(ROOT / "train.py"), *flags, "--run_dir", str(run_dir)]
+    t0 = time.time()
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    out, hit, first_update = [], None, None
+    for line in proc.stdout:
+        out.append(line)
+        match = FIRST_UPDATE.search(line)
+        if match:
+            first_update = float(match.group(2))
+        if hit is None and line.startswith("step "):
+            hit = first_success(run_dir / "metrics.jsonl", target)
+            if hit and not full:
+                proc.send_signal(signal.SIGINT)
+        if time.time() - t0 > timeout_s:
+            proc.send_signal(signal.SIGINT)
+    proc.wait()
+    last = [json.loads(x) for x in (run_dir / "metrics.jsonl").read_text().splitlines()] if (
+        run_dir / "metrics.jsonl").is_file() else []
+    return {"command": " ".join(cmd[1:]), "returncode": proc.returncode, "wall_s": time.time() - t0,
+            "first_update_s": first_update, "success_step": hit[0] if hit else None,
+            "success_wall_s": hit[1] if hit else None, "last": last[-1] if last else None,
+            "log_tail": "".join(out[-5:])}
+
+
+def summary_line(name: str, results: list[dict]) -> str:
+    times = [r["success_wall_s"] for r in results if r["success_wall_s"] is not None]
+    steps = [r["success_step"] for r in results if r["success_step"] is not None]
+    compiles = [r["first_update_s"] for r in results if r["first_update_s"] is not None]
+    fmt = lambda xs, f: (f"{f(statistics.median(xs))} [{f(min(xs))}, {f(max(xs))}]" if xs else "-")  # noqa: E731
+    return (f"{name:<12} reached {len(times)}/{len(results)}  wall time to success, median [range] "
+            f"{fmt(times, lambda x: f'{x / 60:.1f} min')}  env steps {fmt(steps, lambda x: f'{x / 1e6:.2f}M')}  "
+            f"time to the first update {fmt(compiles, lambda x: f'{x:.0f} s')}")
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m hexa_mjx.time_to_success", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--configs", nargs="+", default=["default", "fast"],
+                        help=f"configurations: {sorted(CONFIGS)} or NAME='--flag value ...' (default: default fast)")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0], help="seeds (default: 0)")
+    parser.add_argument("--target", type=float, default=0.9, help="success rate that counts (default: 0.9)")
+    parser.add_argument("--extra", default="", help="flags added to every run, e.g. '--num_timesteps 3000000'")
+    parser.add_argument("--fixed_start", action="store_true",
+                        help="train and evaluate from the report's fixed start instead of random starts")
+    parser.add_argument("--full", action="store_true", help="let every run finish its budget")
+    parser.add_argument("--timeout_min", type=float, default=60.0, help="stop a run after this long (default: 60)")
+    parser.add_argument("--out", default="runs/time_to_success", help="folder for the runs and the JSON")
+    args = parser.parse_args(argv)
+    configs = [parse_config(c) for c in args.configs]
+    out = Path(args.out)
+    if out.exists() and any(out.iterdir()):
+        print(f"error: {out} is not empty; choose another --out", file=sys.stderr)
+        return 2
+    out.mkdir(parents=True, exist_ok=True)
+    results: dict[str, list[dict]] = {name: [] for name, _ in configs}
+    for k, seed in enumerate(args.seeds):
+        turn = configs[k % len(configs):] + configs[:k % len(configs)]  # alternate who goes first
+        for name, flags in turn:
+            run_flags = [*flags, *([] if args.fixed_start else RANDOM_STARTS), *args.extra.split(), "--seed", str(seed)]
+            r = run_one(run_flags, out / f"{name}-s{seed}", args.target, args.full, args.timeout_min * 60)
+            results[name].append({"seed": seed, **r})
+            got = (f"{r['success_wall_s'] / 60:.1f} min, {r['success_step']:,} steps" if r["success_step"] is not None
+                   else "not reached")
+            print(f"{name} seed {seed}: success >= {args.target:.0%} at {got}; first update after "
+                  f"{r['first_update_s']} s; run {r['wall_s'] / 60:.1f} min", flush=True)
+    (out / "time_to_success.json").write_text(json.dumps(results, indent=1))
+    print("\nside by side, seeds " + " ".join(map(str, args.seeds)))
+    for name, _ in configs:
+        print(summary_line(name, results[name]))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,47 @@
+"""train.py's flags, presets, the compile cache's folder and the time-to-success study's parsing."""
+
+import json
+
+import pytest
+
+from hexa_mjx import config, jax_setup, time_to_success
+
+
+def test_flags_and_their_negations():
+    cfg = config.parse_args(["--task", "navigate", "--no_compile_cache", "--no_progress", "--resume"])
+    assert cfg.task == "navigate" and cfg.reward == "navigate"  # the task's own reward by default
+    assert not cfg.compile_cache and not cfg.progress and cfg.resume
+    default = config.parse_args([])
+    assert default.compile_cache and default.progress and default.reward == "goal_directed"
+
+
+def test_preset_fills_only_what_the_command_line_leaves():
+    cfg = config.parse_args(["--preset", "paper", "--num_envs", "16"])
+    assert cfg.num_envs == 16 and cfg.unroll_length == config.PRESETS["paper"]["unroll_length"]
+
+
+def test_compile_cache_folder_is_per_user_and_keyed(monkeypatch, tmp_path):
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    folder = jax_setup.compile_cache_dir()
+    assert folder.parent == tmp_path / "hexa_mjx" and folder.name.startswith("xla-") and len(folder.name) == 16
+    monkeypatch.setattr(jax_setup.jax, "__version__", "0.0.0")
+    assert jax_setup.compile_cache_dir() != folder  # another jax, another folder
+
+
+def test_time_to_success_reads_the_first_good_evaluation(tmp_path):
+    rows = [{"step": 0, "walltime_s": 50.0, "success_rate": 0.0},
+            {"step": 100, "walltime_s": 90.0, "success_rate": 0.875},
+            {"step": 200, "walltime_s": 130.0, "success_rate": 0.9375},
+            {"step": 300, "walltime_s": 170.0, "success_rate": 1.0}]
+    path = tmp_path / "metrics.jsonl"
+    path.write_text("".join(json.dumps(r) + "\n" for r in rows))
+    assert time_to_success.first_success(path, 0.9) == (200, 130.0)
+    assert time_to_success.first_success(path, 1.0) == (300, 170.0)
+    assert time_to_success.first_success(tmp_path / "none.jsonl", 0.9) is None
+
+
+def test_time_to_success_configurations():
+    assert time_to_success.parse_config("e4=--update_epochs 4 --lr 1e-3") == ("e4", ["--update_epochs", "4", "--lr", "1e-3"])
+    assert time_to_success.parse_config("paper") == ("paper", ["--preset", "paper"])
+    with pytest.raises(SystemExit, match="unknown configuration"):
+        time_to_success.parse_config("quick")
