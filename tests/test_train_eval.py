@@ -229,3 +229,45 @@ def test_missing_opengl_names_the_package(env, monkeypatch, tmp_path):
     monkeypatch.delenv("MUJOCO_GL", raising=False)
     with pytest.raises(RuntimeError, match="apt-get install libegl1 libegl-mesa0 libosmesa6"):
         evaluation.render_video(env, np.zeros((2, env.mj_model.nq)), tmp_path / "x.mp4", np.zeros((2, 2)))
+
+
+def test_navigation_input_errors_come_before_compiling(trained, tmp_path):
+    run_dir, _ = trained  # a report-task run
+    cases = [
+        (["--waypoints", "1,0 1"], "waypoint '1' is not x,y"),
+        (["--waypoints", ""], "no waypoints"),
+        (["--waypoints", "1,0"], "waypoints need a navigation policy"),
+        (["--task", "navigate", "--goal_min_distance", "3", "--goal_max_distance", "1"], "0 <= min <= max"),
+        (["--task", "navigate", "--goal_min_distance", "-1"], "0 <= min <= max"),
+        (["--task", "fly"], "invalid choice: 'fly'"),
+    ]
+    for flags, message in cases:
+        proc = run("eval.py", "--ckpt", str(run_dir), "--no-video", "--out", str(tmp_path / "o"), *flags, check=False)
+        assert proc.returncode == 2 and message in proc.stderr, (flags, proc.stderr[-500:])
+    assert not (tmp_path / "o").exists()
+    proc = run("train.py", "--task", "navigate", "--reward", "goal_directed", "--run_dir", str(tmp_path / "n"),
+               check=False)
+    assert proc.returncode == 2 and "not one of the navigate task's" in proc.stderr
+
+
+def test_a_policy_runs_only_where_its_observation_exists():
+    goal_run = config.TrainConfig()
+    baseline = config.make_env_for(goal_run, task="navigate")  # the report's policy on navigation goals
+    assert baseline.name == "navigate" and baseline.observation_size == 52
+    nav_run = config.TrainConfig(task="navigate", reward="navigate", goal_max_distance=2.0)
+    with pytest.raises(ValueError, match="navigate policy; it cannot be run on the goal task"):
+        config.make_env_for(nav_run, task="goal")
+    far = config.make_env_for(nav_run, goal_min_distance=4.0, goal_max_distance=4.0)
+    assert far.config.goal_distance_cap == 2.0  # the policy keeps the distance cap it trained with
+
+
+def test_waypoint_rollout_records_arrivals():
+    """A path whose first two waypoints lie inside the start's radius: both are completed at once."""
+    env = config.make_env_for(config.TrainConfig(task="navigate", reward="navigate", episode_length=12),
+                              waypoints=((0.0, 0.0), (0.2, 0.0), (5.0, 0.0)))
+    start, traj = evaluation.rollout(env, lambda obs, key: jax.numpy.zeros((obs.shape[0], 18)), 2)
+    np.testing.assert_array_equal(traj["goals_reached"][:3, 0], [1, 1, 0])
+    np.testing.assert_allclose(traj["goal"][1, 0], env.qpos0[:2] + [0.2, 0.0], atol=1e-6)
+    summary = evaluation.episode_table(env, start, traj)["summary"]["waypoints"]
+    assert summary["completed_rate"] == 0.0 and summary["arrival_s_mean"][:2] == pytest.approx([env.dt, 2 * env.dt])
+    assert summary["arrival_s_mean"][2] is None
