@@ -43,6 +43,8 @@ def main(argv=None) -> int:
     parser.add_argument("--goal_max_distance", type=float, default=None, help="navigate: m (default: the run's)")
     parser.add_argument("--episode_length", type=int, default=None,
                         help="control steps per episode (default: the run's)")
+    parser.add_argument("--shadows", action="store_true",
+                        help="render shadows and the skybox (5x slower without a GPU)")
     parser.add_argument("--no_compile_cache", dest="compile_cache", action="store_false",
                         help="don't keep compiled programs in the per-user cache folder")
     args = parser.parse_args(argv)
@@ -54,7 +56,7 @@ def main(argv=None) -> int:
     try:
         waypoints = nav_metrics.parse_waypoints(args.waypoints) if args.waypoints is not None else None
         result = evaluation.evaluate(args.ckpt, episodes=args.episodes, videos=args.videos, out=args.out,
-                                     seed=args.seed, video=args.video, task=args.task,
+                                     seed=args.seed, video=args.video, task=args.task, shadows=args.shadows,
                                      start_joint_noise=args.start_joint_noise, start_yaw_noise=args.start_yaw_noise,
                                      max_contact_points=args.max_contact_points, waypoints=waypoints,
                                      goal_min_distance=args.goal_min_distance,

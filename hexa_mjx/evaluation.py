@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import warnings
 from pathlib import Path
 
 import jax
@@ -41,11 +42,17 @@ def group_contacts(env, data, groups) -> jax.Array:
 def rollout(env, policy, num_episodes: int, seed: int = 0):
     """Run `num_episodes` episodes in parallel to their end; returns per-step arrays (time first)
     of qpos, the goal each step is scored against, reward, done, distance, floor contacts per
-    CONTACT_GROUPS entry and the env's metrics, with `alive` marking steps in an episode."""
+    CONTACT_GROUPS entry and the env's metrics, with `alive` marking steps in an episode.
+
+    The episodes are split over as many of JAX's devices as divide them (one per core on the CPU
+    after `prepare_jax`), in order, so episode i is the same whatever the split.
+    """
     steps = env.config.episode_length
     groups = contact_groups(env)
+    devices = max(d for d in range(1, jax.local_device_count() + 1) if num_episodes % d == 0)
+    keys = jax.random.split(jax.random.PRNGKey(seed), num_episodes)
+    step_keys = jax.random.split(keys[0], steps)  # the deterministic policy ignores them
 
-    @jax.jit
     def run(keys):
         state = jax.vmap(env.reset)(keys)
 
@@ -61,11 +68,15 @@ def rollout(env, policy, num_episodes: int, seed: int = 0):
             return (nxt, alive * (1.0 - nxt.done)), out
 
         start_qpos = state.pipeline_state.qpos
-        _, traj = jax.lax.scan(body, (state, jp.ones(num_episodes)), jax.random.split(keys[0], steps))
+        _, traj = jax.lax.scan(body, (state, jp.ones(keys.shape[0])), step_keys)
         return start_qpos, traj
 
-    start, traj = run(jax.random.split(jax.random.PRNGKey(seed), num_episodes))
-    return np.asarray(start), jax.tree.map(np.asarray, traj)
+    if devices == 1:
+        start, traj = jax.jit(run)(keys)
+        return np.asarray(start), jax.tree.map(np.asarray, traj)
+    start, traj = jax.pmap(run)(keys.reshape(devices, -1, *keys.shape[1:]))
+    merge = lambda x: np.moveaxis(np.asarray(x), 0, 1).reshape(x.shape[1], num_episodes, *x.shape[3:])  # noqa: E731
+    return np.asarray(start).reshape(num_episodes, -1), jax.tree.map(merge, traj)
 
 
 def episode_table(env, start_qpos, traj) -> dict:
@@ -218,10 +229,17 @@ def navigation_rows(summary: dict) -> list[tuple[str, str]]:
     return rows
 
 
+VIDEO_FPS = 30  # frames per second of eval's videos (real time: every ctrl_hz / 30th control step)
+
+
 def render_video(env, qpos_frames: np.ndarray, path: Path, goals: np.ndarray, waypoints=(), width=640,
-                 height=480) -> int:
-    """Render qpos frames (T, nq) from the tracking camera into an MP4 at the control rate, with the
-    goal marker at each frame's goal (T, 2) and the waypoint path (start -> waypoints) drawn."""
+                 height=480, fps: float = VIDEO_FPS, shadows: bool = False) -> int:
+    """Render qpos frames (T, nq, one per control step) from the tracking camera into a real-time
+    MP4 of about `fps` frames per second, with the goal marker at each frame's goal (T, 2) and the
+    waypoint path (start -> waypoints) drawn. Returns the number of frames written.
+
+    Shadows and the skybox are off unless `shadows`: with software OpenGL (no GPU) they cost 5x
+    the frame rate (docs/RESULTS.md, "Evaluation time")."""
     import imageio.v2 as imageio
     import mujoco
 
@@ -240,20 +258,29 @@ def render_video(env, qpos_frames: np.ndarray, path: Path, goals: np.ndarray, wa
             f"`apt-get install {GL_PACKAGES}` (or try MUJOCO_GL=osmesa), "
             "or pass --no-video") from e
     corners = np.vstack([qpos_frames[0, :2], np.asarray(waypoints, float).reshape(-1, 2) + env.qpos0[:2]])
+    stride = max(int(round(1 / (env.dt * fps))), 1)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.stem + ".tmp" + path.suffix)
-    with imageio.get_writer(tmp, fps=round(1 / env.dt), codec="libx264", quality=7, macro_block_size=16) as writer:
-        for qpos, goal in zip(qpos_frames, goals):
+    written = 0
+    # The encoder is an ffmpeg subprocess. JAX warns on any fork in a threaded process; subprocess's
+    # fork is followed at once by exec in C, which is safe, so that warning is noise here.
+    warnings.filterwarnings("ignore", message=r"os\.fork\(\) was called", category=RuntimeWarning)
+    with imageio.get_writer(tmp, fps=1 / (env.dt * stride), codec="libx264", quality=7,
+                            macro_block_size=16) as writer:
+        for qpos, goal in zip(qpos_frames[::stride], goals[::stride]):
             data.qpos[:] = qpos
             data.mocap_pos[mocap, :2] = goal
             mujoco.mj_forward(model, data)
             renderer.update_scene(data, camera=robot.TRACKING_CAMERA)
+            renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = shadows
+            renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = shadows
             if waypoints:
                 draw_path(renderer.scene, corners)
             writer.append_data(renderer.render())
+            written += 1
     renderer.close()
     tmp.replace(path)
-    return len(qpos_frames)
+    return written
 
 
 def draw_path(scene, corners: np.ndarray, width=0.01, height=0.003) -> None:
@@ -272,7 +299,8 @@ def draw_path(scene, corners: np.ndarray, width=0.01, height=0.003) -> None:
 
 
 def evaluate(ckpt: str | Path, episodes: int = 128, videos: int = 1, out: str | Path | None = None,
-             seed: int = 0, video: bool = True, task: str | None = None, **env_overrides) -> dict:
+             seed: int = 0, video: bool = True, task: str | None = None, shadows: bool = False,
+             **env_overrides) -> dict:
     """Load a checkpoint, run `episodes` deterministic episodes, write metrics JSON and videos.
 
     Keywords that are `EnvConfig` fields (start noise, contact cap, goal range, waypoints, episode
@@ -306,7 +334,7 @@ def evaluate(ckpt: str | Path, episodes: int = 128, videos: int = 1, out: str | 
             frames = np.concatenate([start[i:i + 1], traj["qpos"][:n, i]])
             goals = traj["goal"][np.minimum(np.arange(n + 1), n - 1), i]  # each frame: the goal walked to next
             path = out / f"episode_{i}.mp4"
-            render_video(env, frames, path, goals, env.config.waypoints)
+            render_video(env, frames, path, goals, env.config.waypoints, shadows=shadows)
             result["videos"].append(str(path))
     tmp = out / "metrics.json.tmp"
     tmp.write_text(json.dumps(result, indent=1))
