@@ -68,6 +68,8 @@ def main(argv=None) -> int:
     print(evaluation.format_table(result["summary"]))
     for path in result["videos"]:
         print(f"video: {path}")
+    if "paths" in result:
+        print(f"tracks from above: {result['paths']}")
     return 0
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -133,10 +134,34 @@ def default_run_dir(cfg: TrainConfig) -> Path:
 
 
 
+# Valid ranges of numeric flags: (low, high, low included, high included); NaN is never valid.
+RANGES = {
+    "lr": (0.0, math.inf, False, False), "discount": (0.0, 1.0, False, True), "gae_lambda": (0.0, 1.0, True, True),
+    "clip": (0.0, math.inf, False, False), "vf_coef": (0.0, math.inf, True, False),
+    "ent_coef": (0.0, math.inf, True, False), "max_grad_norm": (0.0, math.inf, False, False),
+    "reward_scaling": (0.0, math.inf, False, False), "mean_init_scale": (0.0, math.inf, False, False),
+    "ctrl_hz": (0.0, math.inf, False, False), "batch_size": (1, math.inf, True, False),
+    "num_minibatches": (1, math.inf, True, False), "num_envs": (1, math.inf, True, False),
+}
+
+
+def check_ranges(cfg: TrainConfig) -> None:
+    """ConfigError for a numeric flag outside its range (RANGES) or a hidden layer size below 1."""
+    for name, (low, high, low_ok, high_ok) in RANGES.items():
+        value = getattr(cfg, name)
+        inside = (low < value or (low_ok and value == low)) and (value < high or (high_ok and value == high))
+        if not (math.isfinite(value) and inside):
+            lo, hi = ("[" if low_ok else "("), ("]" if high_ok else ")")
+            raise ConfigError(f"--{name} must be a finite number in {lo}{low:g}, {high:g}{hi}, got {value}")
+    if not cfg.hidden or min(cfg.hidden) < 1:
+        raise ConfigError(f"--hidden sizes must each be at least 1, got {cfg.hidden}")
+
+
 def validate(cfg: TrainConfig) -> TrainConfig:
     """Fail fast, before any compile, on settings that cannot work; returns cfg with reward and run_dir set."""
     cfg = dataclasses.replace(cfg, reward=cfg.reward or task_class(cfg.task).rewards[0])
     rewards.make_scales(cfg.reward, cfg.ablate)  # unknown names raise ValueError
+    check_ranges(cfg)
     trajectories = cfg.batch_size * cfg.num_minibatches
     if cfg.num_envs < 1 or trajectories % cfg.num_envs:
         fits = [n for n in (8, 16, 32, 64, 128, 256, 512, 1024, 2048, 4096) if trajectories % n == 0]

@@ -14,7 +14,7 @@ import jax
 import jax.numpy as jp
 import numpy as np
 
-from hexa_mjx import checkpoints, config, nav_metrics, robot, training
+from hexa_mjx import checkpoints, config, nav_metrics, plots, robot, training
 
 GL_PACKAGES = "libegl1 libegl-mesa0 libosmesa6"  # Debian/Ubuntu
 
@@ -179,7 +179,9 @@ def format_table(summary: dict) -> str:
             ("minimum distance, mean", f"{summary['min_distance_mean']:.3f} m"),
             ("goal bonus, mean", f"{summary['goal_bonus_mean']:.1f}"),
             ("return, mean +- std", f"{summary['return_mean']:.1f} +- {summary['return_std']:.1f}"),
-            ("fall rate", f"{summary['fall_rate']:.1%}"), ("mean speed", f"{summary['mean_speed']:.3f} m/s"),
+            ("fall rate", f"{summary['fall_rate']:.1%}"),
+            ("non-finite physics endings", f"{summary['nonfinite_rate']:.1%}"),
+            ("mean speed", f"{summary['mean_speed']:.3f} m/s"),
             ("episode length, mean", f"{summary['episode_length_mean']:.0f} steps")]
     steps = summary["steps_to_goal_mean"]
     rows.append(("steps to the goal, mean of successes", "-" if steps is None else f"{steps:.0f}"))
@@ -328,6 +330,8 @@ def evaluate(ckpt: str | Path, episodes: int = 128, videos: int = 1, out: str | 
         run.update(goal_min_distance=env.config.goal_min_distance, goal_max_distance=env.config.goal_max_distance,
                    waypoints=[list(p) for p in env.config.waypoints])
     result = {"checkpoint": str(ckpt_dir), "step": step, "config": run, **table, "videos": []}
+    if env.name == "navigate":
+        result["paths"] = str(plot_tracks(env, start, traj, out / "paths.png"))
     if video:
         for i in range(min(videos, episodes)):
             n = int(traj["alive"][:, i].sum())
@@ -340,6 +344,19 @@ def evaluate(ckpt: str | Path, episodes: int = 128, videos: int = 1, out: str | 
     tmp.write_text(json.dumps(result, indent=1))
     tmp.replace(out / "metrics.json")
     return result
+
+
+def plot_tracks(env, start, traj, out: Path, count: int = 8) -> Path:
+    """Top view of the first episodes' torso tracks with their goals (or the waypoint path)."""
+    tracks, goals = [], []
+    for i in range(min(count, start.shape[0])):
+        n = int(traj["alive"][:, i].sum())
+        tracks.append(np.concatenate([start[i:i + 1, :2], traj["qpos"][:n, i, :2]]))
+        goals.append(np.unique(traj["goal"][:n, i], axis=0))
+    if env.config.waypoints:
+        corners = np.vstack([start[0, :2], np.asarray(env.config.waypoints) + env.qpos0[:2]])
+        return plots.plot_paths(tracks, out, corners=corners, title="torso tracks along the waypoint path")
+    return plots.plot_paths(tracks, out, goals=goals, title=f"torso tracks and goals, {len(tracks)} episodes")
 
 
 def check_writable(folder: Path) -> None:

@@ -3,8 +3,9 @@
     python -m hexa_mjx.plots runs/goal_directed-s0 runs/goal_directed-s1 -o docs/img/curves.png
     python -m hexa_mjx.plots --frames runs/goal_directed-s0/eval/episode_0.mp4 [--every 40 --count 6] -o frames.png
 
-One panel per figure (final distance to goal, success rate, episodic return, goal bonus)
-against environment steps, one line per run, labelled by the run directory's name.
+One panel per figure (final distance to goal, success rate, episodic return, goal bonus; for
+navigation runs goals reached per episode instead of the bonus) against environment steps, one
+line per run, labelled by the run directory's name. `plot_paths` draws torso tracks from above.
 """
 
 from __future__ import annotations
@@ -35,7 +36,10 @@ def plot_runs(run_dirs: list[Path], out: Path, title: str = "") -> Path:
     for run_dir in run_dirs:
         rows = read_metrics(run_dir)
         steps = [r["step"] for r in rows]
-        for ax, (key, label) in zip(axes.flat, PANELS):
+        panels = PANELS
+        if any(r.get("goals_per_episode", 0) > 0 for r in rows):
+            panels = PANELS[:3] + [("goals_per_episode", "goals reached per episode")]
+        for ax, (key, label) in zip(axes.flat, panels):
             ax.plot(steps, [r.get(key, float("nan")) for r in rows], marker="o", ms=3, label=Path(run_dir).name)
             ax.set_xlabel("environment steps")
             ax.set_ylabel(label)
@@ -44,6 +48,38 @@ def plot_runs(run_dirs: list[Path], out: Path, title: str = "") -> Path:
     axes.flat[0].legend(fontsize=8)
     if title:
         fig.suptitle(title)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
+def plot_paths(tracks: list, out: Path, corners=None, goals: list | None = None, title: str = "") -> Path:
+    """Torso tracks (each (T, 2), m) from above, with a path through `corners` and/or goal points."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    fig, ax = plt.subplots(figsize=(6, 6), constrained_layout=True)
+    for i, track in enumerate(tracks):
+        track = np.asarray(track)
+        ax.plot(track[:, 0], track[:, 1], lw=1, alpha=0.7, label="torso" if i == 0 else None)
+    if corners is not None:
+        corners = np.asarray(corners)
+        ax.plot(corners[:, 0], corners[:, 1], "k--", lw=1.5, label="path")
+        ax.plot(corners[1:, 0], corners[1:, 1], "ko", ms=5)
+    for i, points in enumerate(goals or []):
+        points = np.asarray(points)
+        ax.plot(points[:, 0], points[:, 1], "x", color=f"C{i % 10}", ms=7, label="goals" if i == 0 else None)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    if title:
+        ax.set_title(title)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)
     plt.close(fig)

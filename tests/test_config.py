@@ -45,3 +45,23 @@ def test_time_to_success_configurations():
     assert time_to_success.parse_config("paper") == ("paper", ["--preset", "paper"])
     with pytest.raises(SystemExit, match="unknown configuration"):
         time_to_success.parse_config("quick")
+
+
+@pytest.mark.parametrize("flags, message", [
+    (["--lr", "nan"], "--lr must be a finite number in (0, inf)"),
+    (["--lr", "-1"], "--lr must be"),
+    (["--discount", "2"], "--discount must be a finite number in (0, 1]"),
+    (["--gae_lambda", "5"], "--gae_lambda must be"),
+    (["--clip", "-1"], "--clip must be"),
+    (["--ctrl_hz", "0"], "--ctrl_hz must be"),
+    (["--batch_size", "0"], "--batch_size must be"),
+    (["--num_minibatches", "0"], "--num_minibatches must be"),
+    (["--hidden", "0"], "--hidden sizes must each be at least 1"),
+    (["--max_grad_norm", "inf"], "--max_grad_norm must be"),
+])
+def test_numeric_flags_out_of_range_are_rejected(flags, message, tmp_path):
+    cfg = config.parse_args([*flags, "--run_dir", str(tmp_path / "run")])
+    with pytest.raises(config.ConfigError, match=message.replace("(", r"\(").replace(")", r"\)").replace("[", r"\[")
+                       .replace("]", r"\]")):
+        config.validate(cfg)
+    assert not (tmp_path / "run").exists()
