@@ -66,8 +66,9 @@ def sector_of(bearing_deg) -> np.ndarray:
 
 
 def band_of(distance, low: float) -> np.ndarray:
-    """Index of the 0.5 m distance band starting at `low`."""
-    return np.floor((np.asarray(distance) - low) / BAND_M + 1e-9).astype(int)
+    """Index of the 0.5 m distance band starting at `low` (a goal drawn at `low` that float32
+    rounding puts a hair below it counts in the first band)."""
+    return np.maximum(np.floor((np.asarray(distance) - low) / BAND_M + 1e-9).astype(int), 0)
 
 
 def navigation_summary(records: list[dict], episodes: int, success_radius: float, body_length: float,

@@ -176,6 +176,7 @@ def test_goal_records_from_a_hand_made_walk():
     summary = nav_metrics.navigation_summary(records, 1, 0.5, 0.2, 0.5, 3.0)
     assert summary["sectors"]["-90 deg"] == {"goals": 1, "success": 1.0}
     assert summary["bands"]["2.0-2.5 m"] == {"goals": 1, "success": 1.0}
+    assert list(nav_metrics.band_of([3.9999999, 4.0, 4.6], 4.0)) == [0, 0, 1]  # float32 draws at the range's start
     assert summary["speed_to_goal"] == pytest.approx(0.1, rel=0.01)
     assert summary["speed_to_goal_body_lengths"] == pytest.approx(0.5, rel=0.01)
 
