@@ -7,12 +7,19 @@
 Flags and defaults: `python train.py --help` (hexa_mjx/config.py, TrainConfig).
 """
 
+import signal
 import sys
 
 from hexa_mjx import config, jax_setup, training
 
 
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt
+
+
 def main(argv=None) -> int:
+    # A scheduler's SIGTERM (and Ctrl-C) stop training between programs, keeping the last checkpoint.
+    signal.signal(signal.SIGTERM, _interrupt)
     cfg = config.parse_args(argv)
     jax_setup.prepare_jax(cfg.cpu_devices, cfg.compile_cache)  # before anything starts JAX
     try:

@@ -28,6 +28,16 @@ def list_checkpoints(run_dir: Path) -> list[tuple[int, Path]]:
     return sorted(found)
 
 
+def remove_temporaries(run_dir: Path) -> int:
+    """Delete half-written checkpoint folders (`tmp-*`) a killed run left behind; returns how many.
+    Only one process trains in a run directory, so none of them is being written now."""
+    root = checkpoint_dir(run_dir)
+    stale = [p for p in root.glob("tmp-*") if p.is_dir()] if root.is_dir() else []
+    for path in stale:
+        shutil.rmtree(path, ignore_errors=True)
+    return len(stale)
+
+
 def save_checkpoint(run_dir: Path, step: int, params) -> Path:
     """Write params for `step` atomically: into a temporary folder, renamed when complete."""
     import orbax.checkpoint as ocp

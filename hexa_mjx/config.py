@@ -42,8 +42,8 @@ class TrainConfig:
     num_evals: int = dataclasses.field(default=10, metadata={"help": "evaluations (and checkpoints) over the run"})
     resume: bool = dataclasses.field(default=False, metadata={"help": "continue the run in --run_dir"})
     preset: str = dataclasses.field(default="", metadata={
-        "help": "named rollout shape: 'paper' = the report's 8 envs x 2048 steps, minibatch 64",
-        "choices": ["paper"]})
+        "help": "named settings: 'paper' = the report's 8 envs x 2048 steps, minibatch 64; 'fast' = 4 epochs "
+                "and [128, 128] networks, the quickest to a walking policy on a CPU", "choices": ["fast", "paper"]})
     # Rollout shape: brax collects batch_size * num_minibatches trajectories of unroll_length steps
     # per update (here 16 * 32 * 32 = 16384 = the report's 8 x 2048) and splits them into
     # num_minibatches minibatches of batch_size * unroll_length samples.
@@ -97,6 +97,10 @@ PRESETS: dict[str, dict[str, Any]] = {
     # whole trajectory segments, so 64-sample minibatches need 8-step segments: 8 envs each run
     # 256 segments of 8 steps (= 2048 steps) per update, split into 256 minibatches of 8 x 8.
     "paper": {"num_envs": 8, "unroll_length": 8, "batch_size": 8, "num_minibatches": 256},
+    # Chosen for wall time to a walking policy on a 2-core CPU (docs/RESULTS.md, "Time to success"):
+    # 4 epochs per update (Playground's number) and [128, 128] networks cut the learner's matmuls
+    # about 8x, the environment is then most of the time, and the policy still learns in as few steps.
+    "fast": {"update_epochs": 4, "hidden": [128, 128]},
 }
 
 # Settings that may change on --resume without making it a different run.

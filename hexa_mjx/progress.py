@@ -28,6 +28,28 @@ def summarize(metrics: dict) -> dict:
     }
 
 
+def keep_rows_up_to(run_dir: Path, step: int) -> set[int]:
+    """Rewrite metrics.jsonl with one row per evaluation step up to `step` (the checkpoint a run
+    resumes from): rows of a later step, written before a crash lost their checkpoint, would be
+    written again, and a duplicate step is kept once. Returns the steps kept."""
+    path = Path(run_dir) / "metrics.jsonl"
+    if not path.is_file():
+        return set()
+    kept, lines = set(), []
+    for line in path.read_text().splitlines():
+        try:
+            row = json.loads(line)
+        except json.JSONDecodeError:  # a line cut short by a crash
+            continue
+        if row.get("step", math.inf) <= step and row["step"] not in kept:
+            kept.add(row["step"])
+            lines.append(json.dumps(row))
+    tmp = path.with_suffix(".jsonl.tmp")
+    tmp.write_text("".join(line + "\n" for line in lines))
+    tmp.replace(path)
+    return kept
+
+
 class Logger:
     """metrics.jsonl rows, TensorBoard scalars and one console line per evaluation; between
     evaluations a progress line at least every PROGRESS_INTERVAL_S, and lines that say when the

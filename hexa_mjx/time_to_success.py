@@ -4,7 +4,7 @@
 
 Each run is a real `train.py` process (compile included, as a user sees it), given the same
 seeds; configurations take turns within each seed so that machine noise falls on all of them.
-A run stops (Ctrl-C, as a user would) at its first evaluation with success at or above
+A run stops (SIGTERM, which train.py treats as Ctrl-C) at its first evaluation with success at or above
 `--target`, unless `--full` lets it finish its budget. It prints, per configuration and seed:
 wall time and env steps to that evaluation, the time to the first training update (compile),
 and a median-and-range summary. Everything is also written to `<out>/time_to_success.json`.
@@ -59,6 +59,8 @@ def run_one(flags: list[str], run_dir: Path, target: float, full: bool, timeout_
     """Train once in a subprocess; stop it at its first success unless `full`."""
     cmd = [sys.executable, str(ROOT / "train.py"), *flags, "--run_dir", str(run_dir)]
     t0 = time.time()
+    # A shell's background job ignores SIGINT, and its children inherit that: stop runs with SIGTERM,
+    # which train.py handles as Ctrl-C (the last complete checkpoint is kept).
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     out, hit, first_update = [], None, None
     for line in proc.stdout:
@@ -69,9 +71,9 @@ def run_one(flags: list[str], run_dir: Path, target: float, full: bool, timeout_
         if hit is None and line.startswith("step "):
             hit = first_success(run_dir / "metrics.jsonl", target)
             if hit and not full:
-                proc.send_signal(signal.SIGINT)
+                proc.send_signal(signal.SIGTERM)
         if time.time() - t0 > timeout_s:
-            proc.send_signal(signal.SIGINT)
+            proc.send_signal(signal.SIGTERM)
     proc.wait()
     last = [json.loads(x) for x in (run_dir / "metrics.jsonl").read_text().splitlines()] if (
         run_dir / "metrics.jsonl").is_file() else []

@@ -18,10 +18,10 @@ import jax
 import jax.numpy as jp
 from flax import linen
 
-from hexa_mjx.checkpoints import checkpoint_dir, list_checkpoints, load_checkpoint, save_checkpoint
+from hexa_mjx.checkpoints import checkpoint_dir, list_checkpoints, load_checkpoint, remove_temporaries, save_checkpoint
 from hexa_mjx.config import TrainConfig, make_env_for, validate
 from hexa_mjx.jax_setup import devices_for, prepare_jax
-from hexa_mjx.progress import Logger
+from hexa_mjx.progress import Logger, keep_rows_up_to
 
 
 def network_factory(cfg: TrainConfig):
@@ -100,9 +100,16 @@ def train(cfg: TrainConfig) -> dict:
     env = make_env_for(cfg)
 
     start_step, restore = 0, None
+    if remove_temporaries(run_dir):
+        print(f"removed half-written checkpoint folders in {checkpoint_dir(run_dir)}")
     if cfg.resume and list_checkpoints(run_dir):
         start_step, restore = load_checkpoint(list_checkpoints(run_dir)[-1][1], init_params(cfg, env))
         print(f"resuming {run_dir} from step {start_step:,}")
+    elif cfg.resume:
+        print(f"{run_dir} has no complete checkpoint yet (it stopped before its first): starting again from step 0")
+    # One row per evaluation: rows past the checkpoint go, and the checkpoint's own evaluation is
+    # logged again only if a crash came between saving it and writing its row.
+    logged = keep_rows_up_to(run_dir, start_step)
     tmp = run_dir / "config.json.tmp"
     tmp.write_text(json.dumps(dataclasses.asdict(cfg), indent=2))
     tmp.replace(run_dir / "config.json")
@@ -116,7 +123,7 @@ def train(cfg: TrainConfig) -> dict:
     def on_progress(step, metrics):
         if "eval/episode_reward" not in metrics:  # a training batch (brax's log_training_metrics)
             logger.progress(start_step + step, metrics)
-        elif step > 0 or start_step == 0:  # a resumed run has already logged its step-0 evaluation
+        elif step > 0 or start_step not in logged:  # brax evaluates the restored params at its step 0
             logger(start_step + step, metrics)
 
     def on_params(step, make_policy, params):

@@ -79,13 +79,30 @@ def test_resume_continues_step_count(trained, cache_env, tmp_path):
     run_dir, _ = trained
     resumed = tmp_path / "resumed"
     subprocess.run(["cp", "-r", str(run_dir), str(resumed)], check=True)
-    # A checkpoint interrupted mid-write (killed before its rename) must be ignored.
+    # A checkpoint interrupted mid-write (killed before its rename) is ignored and removed.
     (resumed / "checkpoints" / "tmp-000000000128-999").mkdir()
+    # Killed between checkpoint 64 and its evaluation row: that row is missing, and a half line is left.
+    metrics = resumed / "metrics.jsonl"
+    metrics.write_text(metrics.read_text().splitlines()[0] + "\n" + '{"step": 6')
     proc = run("train.py", *TINY, *NOISE, "--num_timesteps", "128", "--seed", "3", "--run_dir", str(resumed),
                "--resume", env=cache_env)
     assert "resuming" in proc.stdout and "from step 64" in proc.stdout
-    assert [r["step"] for r in rows(resumed)] == [0, 64, 128]
+    assert [r["step"] for r in rows(resumed)] == [0, 64, 128]  # each evaluation exactly once
     assert [step for step, _ in checkpoints.list_checkpoints(resumed)] == [64, 128]
+    assert not list((resumed / "checkpoints").glob("tmp-*"))
+
+
+def test_resume_before_the_first_checkpoint_says_so(trained, cache_env, tmp_path):
+    run_dir, _ = trained
+    resumed = tmp_path / "early"
+    subprocess.run(["cp", "-r", str(run_dir), str(resumed)], check=True)
+    subprocess.run(["rm", "-r", str(resumed / "checkpoints")], check=True)
+    metrics = resumed / "metrics.jsonl"
+    metrics.write_text(metrics.read_text().splitlines()[0] + "\n")  # killed after step 0's row
+    proc = run("train.py", *TINY, *NOISE, "--num_timesteps", "64", "--seed", "3", "--run_dir", str(resumed),
+               "--resume", env=cache_env)
+    assert "no complete checkpoint yet" in proc.stdout and "starting again from step 0" in proc.stdout
+    assert [r["step"] for r in rows(resumed)] == [0, 64]  # step 0 not logged twice
 
 
 def test_runs_from_before_a_new_setting_resume(tmp_path):
