@@ -7,7 +7,8 @@ seeds; configurations take turns within each seed so that machine noise falls on
 A run stops (SIGTERM, which train.py treats as Ctrl-C) at its first evaluation with success at or above
 `--target`, unless `--full` lets it finish its budget. It prints, per configuration and seed:
 wall time and env steps to that evaluation, the time to the first training update (compile),
-and a median-and-range summary. Everything is also written to `<out>/time_to_success.json`.
+and a median-and-range summary. The time to the first update is read from train.py's
+"training compiled" line, which `--progress` turns on (add it to --extra). Everything is also written to `<out>/time_to_success.json`.
 """
 
 from __future__ import annotations
@@ -75,12 +76,14 @@ def run_one(flags: list[str], run_dir: Path, target: float, full: bool, timeout_
         if time.time() - t0 > timeout_s:
             proc.send_signal(signal.SIGTERM)
     proc.wait()
-    last = [json.loads(x) for x in (run_dir / "metrics.jsonl").read_text().splitlines()] if (
+    rows = [json.loads(x) for x in (run_dir / "metrics.jsonl").read_text().splitlines()] if (
         run_dir / "metrics.jsonl").is_file() else []
+    # Seconds from the step-0 evaluation to the last one: training (first compile included) and evaluations.
+    trained_s = rows[-1]["walltime_s"] - rows[0]["walltime_s"] if len(rows) > 1 else None
     return {"command": " ".join(cmd[1:]), "returncode": proc.returncode, "wall_s": time.time() - t0,
             "first_update_s": first_update, "success_step": hit[0] if hit else None,
-            "success_wall_s": hit[1] if hit else None, "last": last[-1] if last else None,
-            "log_tail": "".join(out[-5:])}
+            "success_wall_s": hit[1] if hit else None, "trained_s": trained_s,
+            "last": rows[-1] if rows else None, "log_tail": "".join(out[-5:])}
 
 
 def summary_line(name: str, results: list[dict]) -> str:
@@ -122,7 +125,8 @@ def main(argv=None) -> int:
             got = (f"{r['success_wall_s'] / 60:.1f} min, {r['success_step']:,} steps" if r["success_step"] is not None
                    else "not reached")
             print(f"{name} seed {seed}: success >= {args.target:.0%} at {got}; first update after "
-                  f"{r['first_update_s']} s; run {r['wall_s'] / 60:.1f} min", flush=True)
+                  f"{r['first_update_s']} s; step-0 to last evaluation {r['trained_s']} s; "
+                  f"run {r['wall_s'] / 60:.1f} min", flush=True)
     (out / "time_to_success.json").write_text(json.dumps(results, indent=1))
     print("\nside by side, seeds " + " ".join(map(str, args.seeds)))
     for name, _ in configs:

@@ -55,7 +55,9 @@ def test_forward_motion_terms():
 
 def test_variants_differ_only_in_task_terms():
     goal, forward = rewards.VARIANTS["goal_directed"], rewards.VARIANTS["forward_motion"]
-    assert set(goal) == set(forward) == set(rewards.TERMS)
+    assert set(goal) == set(forward) == set(rewards.VARIANTS["navigate"]) == set(rewards.TERMS)
+    navigate = rewards.VARIANTS["navigate"]
+    assert {k for k in goal if goal[k] != navigate[k]} == {"goal_reached"}  # navigation adds one term
     differing = {k for k in goal if goal[k] != forward[k]}
     assert differing == {"goal_approach", "velocity_alignment", "goal_bonus", "forward_progress", "forward_velocity"}
     assert forward["goal_bonus"] == 0.0

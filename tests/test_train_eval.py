@@ -23,7 +23,7 @@ TINY = ["--num_envs", "8", "--batch_size", "8", "--num_minibatches", "2", "--unr
 
 
 # The trained fixture draws start noise per episode (hexa_mjx.wrappers instead of brax's auto-reset).
-NOISE = ["--start_joint_noise", "0.05", "--start_yaw_noise", "0.1"]
+NOISE = ["--start_joint_noise", "0.05", "--start_yaw_noise", "0.1", "--progress"]
 
 
 @pytest.fixture(scope="session")
