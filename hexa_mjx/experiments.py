@@ -52,18 +52,19 @@ def grid(study: str, out: Path, timesteps: int = 2_000_000, seeds: int | None = 
     goes to <out>/<study>-<task>/."""
     if study not in STUDIES:
         raise ValueError(f"unknown study {study!r}; choose one of {STUDIES}")
+    seeds = DEFAULT_SEEDS[study] if seeds is None else seeds
     if study == "navigate":
         study, task = "seeds", "navigate"
     elif study == "main" and task != "goal":
         raise ValueError("the main study compares the report task's two rewards; run it without --task")
     folder = study if task == "goal" else f"{study}-{task}"
-    seeds = DEFAULT_SEEDS[study] if seeds is None else seeds
     if seeds < 1:
         raise ValueError(f"--seeds must be at least 1, got {seeds}")
     if study == "main":
         conditions = {reward: {"reward": reward} for reward in MAIN_REWARDS}
     elif study == "seeds":
-        conditions = {"navigate": {}}
+        # The settings of the documented navigation run (docs/RESULTS.md): 4 epochs, joint start noise.
+        conditions = {"navigate": {"update_epochs": 4, "start_joint_noise": 0.1}}
     elif study == "ablation":
         conditions = {name: {"ablate": ablate} for name, ablate in ABLATION_CONDITIONS.items()}
     else:

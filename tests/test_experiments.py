@@ -104,3 +104,15 @@ def test_aggregation_writes_figures_and_the_right_table(tmp_path):
 def test_aggregate_without_runs_is_a_clear_error(tmp_path):
     with pytest.raises(FileNotFoundError, match="no run folders"):
         experiments.aggregate(tmp_path)
+
+
+def test_navigation_grids(tmp_path):
+    seeds = experiments.grid("navigate", tmp_path, timesteps=1000)
+    assert [r.config.seed for r in seeds] == [0, 1, 2]
+    assert {(r.config.task, r.config.reward, r.config.update_epochs) for r in seeds} == {("navigate", "navigate", 4)}
+    assert seeds[0].config.run_dir == str(tmp_path / "seeds-navigate" / "navigate-s0")
+    ablation = experiments.grid("ablation", tmp_path, timesteps=1000, task="navigate")
+    assert {r.config.reward for r in ablation} == {"navigate"}
+    assert ablation[1].config.run_dir == str(tmp_path / "ablation-navigate" / "no_contact-s0")
+    with pytest.raises(ValueError, match="run it without --task"):
+        experiments.grid("main", tmp_path, task="navigate")
