@@ -18,6 +18,7 @@ an episode (brax's AutoResetWrapper restores only `pipeline_state` and `obs`).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from pathlib import Path
 
@@ -179,7 +180,7 @@ class HexapodEnv(Env):
         self._goal_mocap = model.body_mocapid[model.body(robot.GOAL_BODY).id]
         legs = sorted({model.joint(j).name.split("_")[0] for j in range(model.njnt)
                        if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE}, key=lambda s: int(s[3:]))
-        self._feet = np.array([model.geom(robot.foot_geom(leg)).id for leg in legs])
+        self.feet = np.array([model.geom(robot.foot_geom(leg)).id for leg in legs])  # foot geom ids
         # Leg index of every geom (-1 for the torso and the world), and whether it is a foot.
         body_leg = np.full(model.nbody, -1)
         for i, leg in enumerate(legs):
@@ -190,9 +191,8 @@ class HexapodEnv(Env):
             if body_leg[b] < 0 and model.body_parentid[b] > 0:
                 body_leg[b] = body_leg[model.body_parentid[b]]
         self.geom_leg = body_leg[model.geom_bodyid]
-        self.feet = self._feet
         self._geom_leg = jp.asarray(self.geom_leg)
-        self._geom_is_foot = jp.asarray(np.isin(np.arange(model.ngeom), self._feet))
+        self._geom_is_foot = jp.asarray(np.isin(np.arange(model.ngeom), self.feet))
         self._ctrl_lo, self._ctrl_hi = (jp.asarray(x, dtype=jp.float32) for x in model.actuator_ctrlrange.T)
 
         # Settle the start pose once with MuJoCo C; every reset starts from that state.
@@ -210,9 +210,9 @@ class HexapodEnv(Env):
 
     # -- brax Env interface -------------------------------------------------
 
-    @property
+    @functools.cached_property
     def observation_size(self) -> int:
-        return int(jax.eval_shape(self.observe, self._data0).shape[0])
+        return int(jax.eval_shape(self.observe, self._data0).shape[0])  # traced once, not per call
 
     @property
     def action_size(self) -> int:
@@ -338,7 +338,7 @@ class HexapodEnv(Env):
         more than `lift_clearance`, contacts of any non-foot geom), from MJX's contact arrays."""
         on_floor, other = self.floor_contact_geoms(data)
         leg = self._geom_leg[other]
-        foot_clearance = data.geom_xpos[self._feet, 2] - self.mj_model.geom_size[self._feet, 0]
+        foot_clearance = data.geom_xpos[self.feet, 2] - self.mj_model.geom_size[self.feet, 0]
         lifted = foot_clearance[jp.maximum(leg, 0)] > self.config.lift_clearance
         bad = on_floor & (leg >= 0) & lifted
         return bad.sum(), (on_floor & ~self._geom_is_foot[other]).sum()

@@ -7,6 +7,8 @@ on hand-made trajectories. Bearings are measured from the torso's heading when t
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 SECTOR_DEG = 45.0
@@ -149,8 +151,6 @@ def segment_distance(p, a, b) -> np.ndarray:
 
 def parse_waypoints(text: str) -> list[tuple[float, float]]:
     """Waypoints from "x,y x,y ..." (metres), or from a file holding that text (one or more lines)."""
-    from pathlib import Path
-
     source = text
     if text and Path(text).is_file():
         source = Path(text).read_text()

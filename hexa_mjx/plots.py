@@ -48,6 +48,13 @@ def plot_runs(run_dirs: list[Path], out: Path, title: str = "") -> Path:
     axes.flat[0].legend(fontsize=8)
     if title:
         fig.suptitle(title)
+    return _save(fig, out)
+
+
+def _save(fig, out: Path) -> Path:
+    """Write `fig` to the PNG `out` (creating its folder) and free it."""
+    import matplotlib.pyplot as plt
+
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)
     plt.close(fig)
@@ -80,10 +87,7 @@ def plot_paths(tracks: list, out: Path, corners=None, goals: list | None = None,
     ax.legend(fontsize=8)
     if title:
         ax.set_title(title)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    return out
+    return _save(fig, out)
 
 
 def contact_sheet(video: Path, out: Path, count: int = 6, every: int = 40) -> Path:
