@@ -1,8 +1,6 @@
 """hexa_mjx: a JAX-native, massively parallel hexapod trainer on MuJoCo MJX."""
 
-import contextlib
 import ctypes.util
-import io
 import os
 
 # Off-screen rendering: MuJoCo reads MUJOCO_GL when first imported. Unless the user chose, take
@@ -20,11 +18,17 @@ if not os.environ.get("MUJOCO_GL"):
 # unless the user asks for it. It must be set before jaxlib loads.
 os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "3")
 
-# mujoco.mjx prints a notice on import when the optional (GPU-only) warp backend is absent.
-with contextlib.redirect_stdout(io.StringIO()):
-    from mujoco import mjx  # noqa: F401
-
-from hexa_mjx.env import EnvConfig, HexapodEnv  # noqa: E402
-from hexa_mjx.tasks import TASKS, make_env  # noqa: E402
-
 __all__ = ["EnvConfig", "HexapodEnv", "TASKS", "make_env"]
+
+
+def __getattr__(name):
+    # Loaded on first use, so that the native-MuJoCo player (hexa_mjx.native) runs without JAX.
+    if name in ("HexapodEnv", "TASKS", "make_env"):
+        from hexa_mjx import env, tasks
+
+        return {"HexapodEnv": env.HexapodEnv, "TASKS": tasks.TASKS, "make_env": tasks.make_env}[name]
+    if name == "EnvConfig":
+        from hexa_mjx.env_config import EnvConfig
+
+        return EnvConfig
+    raise AttributeError(f"module 'hexa_mjx' has no attribute {name!r}")

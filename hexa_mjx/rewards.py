@@ -1,13 +1,15 @@
 """Reward terms (report eq. 1 and section 3.2) and the scale tables that weight them.
 
 Each term is a pure function of explicit arrays returning an unscaled value, so it
-can be tested without MuJoCo. A reward variant is a scales table; an ablation sets
+can be tested without MuJoCo. Terms use only operators and array methods, so the same
+code scores the MJX environment (JAX) and the native-MuJoCo one (NumPy). A reward variant is a scales table; an ablation sets
 some scales to zero, and a zero scale drops the term from the computation.
 """
 
 from __future__ import annotations
 
-import jax.numpy as jp
+from hexa_mjx.kinematics import namespace, roll_pitch
+
 
 
 def goal_approach(prev_dist, dist):
@@ -17,47 +19,47 @@ def goal_approach(prev_dist, dist):
 
 def goal_reached(completed):
     """1 on the step a goal is completed (navigation: the next goal is drawn then)."""
-    return completed.astype(jp.float32)
+    return completed.astype("float32")
 
 
 def velocity_alignment(vel_xy, goal_dir_xy):
     """|v| * (v_hat . g_hat) = planar speed toward the goal, m/s."""
-    return jp.dot(vel_xy, goal_dir_xy)
+    return vel_xy @ goal_dir_xy
 
 
 def goal_bonus(dist, success_radius, non_foot_contacts=0):
     """1 while the torso is within the success radius of the goal with only its feet on the floor."""
-    return ((dist < success_radius) & (non_foot_contacts == 0)).astype(jp.float32)
+    return ((dist < success_radius) & (non_foot_contacts == 0)).astype("float32")
 
 
 def stability(roll, pitch):
     """|roll| + |pitch| of the torso, rad."""
-    return jp.abs(roll) + jp.abs(pitch)
+    return abs(roll) + abs(pitch)
 
 
 def height(z, target):
     """|z - target| of the torso origin, m."""
-    return jp.abs(z - target)
+    return abs(z - target)
 
 
 def energy(joint_vel):
     """Sum of squared joint velocities, (rad/s)^2."""
-    return jp.sum(jp.square(joint_vel))
+    return (joint_vel * joint_vel).sum()
 
 
 def contact_quality(bad_leg_contacts):
     """Leg contacts with the floor while that leg's foot is lifted (leg-side dragging)."""
-    return bad_leg_contacts.astype(jp.float32)
+    return bad_leg_contacts.astype("float32")
 
 
 def body_contact(non_foot_contacts):
     """Floor contacts of any geom that is not a foot."""
-    return non_foot_contacts.astype(jp.float32)
+    return non_foot_contacts.astype("float32")
 
 
 def termination(flipped):
     """1 on the step the episode ends by a fall (or a non-finite physics state)."""
-    return flipped.astype(jp.float32)
+    return flipped.astype("float32")
 
 
 def forward_progress(prev_xy, xy):
@@ -75,6 +77,34 @@ TERMS = {
     for f in (goal_approach, goal_reached, velocity_alignment, goal_bonus, stability, height, energy, contact_quality,
               body_contact, termination, forward_progress, forward_velocity)
 }
+
+def terms(names, config, prev_qpos, qpos, qvel, goal_xy, bad_contacts, non_foot_contacts, done, completed) -> dict:
+    """Unscaled values of the terms `names` for the transition prev_qpos -> (qpos, qvel), with
+    `goal_xy` the step's goal, contact counts of the new state, and `config` an EnvConfig.
+    Either engine's arrays; under jit, XLA drops the inputs no named term uses."""
+    xp = namespace(qpos)
+    xy, prev_xy, vel_xy = qpos[:2], prev_qpos[:2], qvel[:2]
+    dist = xp.linalg.norm(goal_xy - xy)
+    goal_dir = (goal_xy - xy) / xp.maximum(dist, 1e-6)
+    # The previous position's distance to this step's goal (the goal only moves after the terms).
+    dist_prev = xp.linalg.norm(goal_xy - prev_xy)
+    roll, pitch = roll_pitch(qpos[3:7])
+    inputs = {
+        "goal_approach": (dist_prev, dist),
+        "goal_reached": (completed,),
+        "velocity_alignment": (vel_xy, goal_dir),
+        "goal_bonus": (dist, config.success_radius, non_foot_contacts if config.bonus_on_feet_only else 0),
+        "stability": (roll, pitch),
+        "height": (qpos[2], config.target_height),
+        "energy": (qvel[6:],),
+        "contact_quality": (bad_contacts,),
+        "body_contact": (non_foot_contacts,),
+        "termination": (done,),
+        "forward_progress": (prev_xy, xy),
+        "forward_velocity": (vel_xy,),
+    }
+    return {name: TERMS[name](*inputs[name]) for name in names}
+
 
 _SHAPING = {
     "stability": -0.5,

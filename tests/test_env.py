@@ -284,7 +284,7 @@ def test_bad_settings_give_clear_errors():
 
 
 def test_contact_cap_replaces_the_files_own(tmp_path):
-    from hexa_mjx.env import _load_model
+    from hexa_mjx.model import load_model as _load_model
 
     path = tmp_path / "capped.xml"  # the model references no mesh files, so a copy loads anywhere
     path.write_text(robot.MODEL_XML.read_text().replace(

@@ -7,7 +7,7 @@ import pytest
 
 import hexa_mjx
 from hexa_mjx import nav_metrics, rewards
-from hexa_mjx.env import quat_mul, rotate, yaw
+from hexa_mjx.kinematics import quat_mul, rotate, yaw
 
 
 def _yaw_quat(angle):

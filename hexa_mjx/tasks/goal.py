@@ -6,11 +6,12 @@ import jax
 import jax.numpy as jp
 from mujoco import mjx
 
-from hexa_mjx.env import HexapodEnv, rotate
+from hexa_mjx.env import HexapodEnv
+from hexa_mjx.observations import goal_observation
 
 
 class GoalEnv(HexapodEnv):
-    """One goal on +x; the report's 52-D observation (README, "Observation")."""
+    """One goal on +x; the report's 52-D observation (hexa_mjx.observations.LAYOUTS["goal"])."""
 
     name = "goal"
     rewards = ("goal_directed", "forward_motion")
@@ -19,9 +20,4 @@ class GoalEnv(HexapodEnv):
         return self._start_xy + jp.array([self.config.goal_distance, 0.0])
 
     def observe(self, data: mjx.Data) -> jax.Array:
-        """Torso position and quaternion, world-frame linear and angular velocity, joint angles and
-        velocities, goal vector and distance: 3 + 4 + 3 + 3 + 18 + 18 + 2 + 1 = 52."""
-        goal_vec = self.goal(data) - data.qpos[:2]
-        angvel_world = rotate(data.qvel[3:6], data.qpos[3:7])  # free-joint angular velocity is body-frame
-        return jp.concatenate([data.qpos[:3], data.qpos[3:7], data.qvel[:3], angvel_world,
-                               data.qpos[7:], data.qvel[6:], goal_vec, jp.linalg.norm(goal_vec)[None]])
+        return goal_observation(data.qpos, data.qvel, self.goal(data))

@@ -11,16 +11,8 @@ import jax.numpy as jp
 import numpy as np
 from mujoco import mjx
 
-from hexa_mjx.env import HexapodEnv, rotate, yaw
-
-GRAVITY_WORLD = np.array([0.0, 0.0, -1.0], np.float32)  # unit vector (NumPy: importing must not start JAX)
-
-
-def to_heading_frame(vec_xy: jax.Array, heading: jax.Array) -> jax.Array:
-    """A world-frame planar vector in the frame turned by `heading` (rad) about z."""
-    c, s = jp.cos(heading), jp.sin(heading)
-    return jp.stack([c * vec_xy[0] + s * vec_xy[1], -s * vec_xy[0] + c * vec_xy[1]])
-
+from hexa_mjx.env import HexapodEnv
+from hexa_mjx.observations import navigate_observation
 
 class NavigateEnv(HexapodEnv):
     """Goals at a uniform bearing and distance; on arrival the next one is drawn."""
@@ -45,25 +37,14 @@ class NavigateEnv(HexapodEnv):
         return self._draw_goal(data.qpos[:2], rng)
 
     def observe(self, data: mjx.Data) -> jax.Array:
-        """67 values, heading frame; the layout and units are in the README ("Navigation task")."""
-        quat = data.qpos[3:7]
-        heading = yaw(quat)
-        goal_vec = to_heading_frame(self.goal(data) - data.qpos[:2], heading)
-        dist = jp.linalg.norm(goal_vec)
-        # Beyond the training range the distance reads as the range's end, so a farther goal looks
-        # like the farthest goal trained on and the policy walks toward it until it is in range.
-        seen = jp.minimum(dist, self.config.goal_distance_cap or self.config.goal_max_distance)
-        conj = quat * jp.array([1.0, -1.0, -1.0, -1.0])
-        last_action = 2.0 * (data.ctrl - self._ctrl_lo) / (self._ctrl_hi - self._ctrl_lo) - 1.0
-        return jp.concatenate([
-            goal_vec / jp.maximum(dist, 1e-6), seen[None],         # 0:2 direction, 2 distance (m)
-            data.qpos[2:3],                                         # 3 torso height (m)
-            to_heading_frame(data.qvel[:2], heading), data.qvel[2:3],  # 4:7 linear velocity (m/s)
-            data.qvel[3:6],                                         # 7:10 angular velocity, body frame (rad/s)
-            rotate(GRAVITY_WORLD, conj),                            # 10:13 gravity direction, body frame
-            data.qpos[7:], data.qvel[6:],                           # 13:31 joint angles (rad), 31:49 (rad/s)
-            last_action,                                            # 49:67 previous action
-        ])
+        """67 values, heading frame (hexa_mjx.observations.LAYOUTS["navigate"])."""
+        return navigate_observation(data.qpos, data.qvel, data.ctrl, self.goal(data), self.robot.ctrl_lo,
+                                    self.robot.ctrl_hi, self.distance_cap)
+
+    @property
+    def distance_cap(self) -> float:
+        """m, the largest goal distance the policy observes (the trained range's end by default)."""
+        return self.config.goal_distance_cap or self.config.goal_max_distance
 
     def _draw_goal(self, xy: jax.Array, rng: jax.Array) -> jax.Array:
         k_bearing, k_dist = jax.random.split(rng)

@@ -1,0 +1,77 @@
+"""Environment settings, shared by the MJX environment and the native-MuJoCo engine.
+
+Imports neither JAX nor MuJoCo: the player and deployment code read these settings too.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+from hexa_mjx import robot
+
+
+@dataclasses.dataclass(frozen=True)
+class EnvConfig:
+    """Environment settings; `make_env(**overrides)` sets any of them by name."""
+
+    task: str = "goal"  # a key of hexa_mjx.tasks.TASKS
+    reward: str = ""  # a key of rewards.VARIANTS valid for the task; "": the task's own
+    ablate: tuple[str, ...] = ()  # keys of rewards.ABLATIONS whose terms are zeroed
+    reward_scales: dict = dataclasses.field(default_factory=dict)  # per-term scale overrides
+    model_path: str = str(robot.MODEL_XML)
+    ctrl_hz: float = 60.0  # Hz, policy rate; 240 Hz physics / ctrl_hz must be whole
+    episode_length: int = 1000  # control steps
+    success_radius: float = 0.5  # m
+    # The goal bonus is paid only while nothing but the feet touches the floor. The report pays it
+    # for being within the radius; with that, policies reached the goal, then rested on their shins
+    # there for the rest of the episode (100 per step dwarfs -1 per contact). False: the report's bonus.
+    bonus_on_feet_only: bool = True
+    target_height: float = 0.12  # m, torso-origin height the height term aims for
+    lift_clearance: float = 0.02  # m, foot height above which a leg's floor contact is "bad"
+    settle_steps: int = 100  # physics steps the start pose settles before the first observation
+    # Start-state noise, drawn per reset (the report starts every episode from the same pose).
+    start_joint_noise: float = 0.0  # rad, each joint's start angle is offset uniformly in +-this
+    start_yaw_noise: float = 0.0  # rad, the start heading is turned uniformly in +-this (navigate: always pi)
+    solver_iterations: int | None = None  # None: the model's own setting
+    ls_iterations: int | None = None
+    # MJX gives every robot-floor geom pair fixed contact slots (40 on the report's hexapod: box 4,
+    # capsules 2, spheres 1) and solves for all of them each step. N > 0 keeps only the N deepest
+    # (MJX's `max_contact_points`); 0 keeps every slot. See docs/RESULTS.md, "Speed".
+    max_contact_points: int = 0
+    # Report task ("goal"): one goal this far ahead (+x) of the start.
+    goal_distance: float = 1.5  # m
+    # Navigation task ("navigate"): goals at a bearing uniform over 360 degrees from the torso and a
+    # distance uniform in [goal_min_distance, goal_max_distance]; a new one each time one is reached.
+    goal_min_distance: float = 0.5  # m
+    goal_max_distance: float = 3.0  # m
+    # Navigation: the observed distance is capped here (0: goal_max_distance). A policy keeps the
+    # cap it was trained with when evaluated on another range.
+    goal_distance_cap: float = 0.0  # m
+    # Navigation: a fixed path instead of random goals, ((x, y), ...) in metres, world frame,
+    # relative to the start position. The last waypoint stays the goal once reached.
+    waypoints: tuple = ()
+
+
+def check_config(config: EnvConfig) -> None:
+    """Raise ValueError for settings out of range (before any model is built or compiled)."""
+    for name in ("ctrl_hz", "success_radius", "goal_distance", "goal_max_distance", "target_height"):
+        value = getattr(config, name)
+        if not (math.isfinite(value) and value > 0):
+            raise ValueError(f"{name} must be a finite number above 0, got {value}")
+    if not (math.isfinite(config.goal_distance_cap) and config.goal_distance_cap >= 0):
+        raise ValueError(f"goal_distance_cap must be 0 (the range's end) or a distance in m, got {config.goal_distance_cap}")
+    for name in ("start_joint_noise", "start_yaw_noise"):
+        if not 0 <= getattr(config, name) <= math.pi:
+            raise ValueError(f"{name} is a range in radians from 0 to pi, got {getattr(config, name)}")
+    if not (math.isfinite(config.goal_min_distance) and 0 <= config.goal_min_distance <= config.goal_max_distance):
+        raise ValueError(f"the goal distance range needs 0 <= min <= max, got min {config.goal_min_distance} "
+                         f"and max {config.goal_max_distance} m")
+    if config.episode_length < 1:
+        raise ValueError(f"episode_length must be at least 1, got {config.episode_length}")
+    if config.max_contact_points < 0:
+        raise ValueError(f"max_contact_points must be 0 (every contact slot) or positive, "
+                         f"got {config.max_contact_points}")
+    for point in config.waypoints:
+        if len(point) != 2 or not all(math.isfinite(float(c)) for c in point):
+            raise ValueError(f"a waypoint is a pair of finite coordinates x,y in metres, got {point}")

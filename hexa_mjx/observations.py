@@ -1,0 +1,71 @@
+"""What each task's policy observes: pure functions of the physics state's arrays (NumPy or JAX).
+
+The MJX environment and the native-MuJoCo player and Gymnasium environments call the same
+functions, so a policy sees the same numbers in either engine. `LAYOUTS` names every slice with
+its units; the ONNX export stores it for deployers.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hexa_mjx.kinematics import namespace, rotate, to_heading_frame, yaw
+
+GRAVITY_WORLD = np.array([0.0, 0.0, -1.0], np.float32)  # unit vector
+
+
+def goal_observation(qpos, qvel, goal_xy):
+    """The report's 52 values, world frame (LAYOUTS["goal"])."""
+    xp = namespace(qpos)
+    goal_vec = goal_xy - qpos[:2]
+    angvel_world = rotate(qvel[3:6], qpos[3:7])  # free-joint angular velocity is body-frame
+    return xp.concatenate([qpos[:3], qpos[3:7], qvel[:3], angvel_world, qpos[7:], qvel[6:], goal_vec,
+                           xp.linalg.norm(goal_vec)[None]])
+
+
+def navigate_observation(qpos, qvel, ctrl, goal_xy, ctrl_lo, ctrl_hi, distance_cap):
+    """67 values in the heading frame (x forward, y left, z up, turned by the torso's yaw only)
+    (LAYOUTS["navigate"]). The distance reads at most `distance_cap` m: a farther goal looks like
+    the farthest goal trained on, and the policy walks toward it until it is in range."""
+    xp = namespace(qpos)
+    quat = qpos[3:7]
+    heading = yaw(quat)
+    goal_vec = to_heading_frame(goal_xy - qpos[:2], heading)
+    dist = xp.linalg.norm(goal_vec)
+    conj = quat * xp.asarray([1.0, -1.0, -1.0, -1.0], dtype=quat.dtype)
+    last_action = 2.0 * (ctrl - ctrl_lo) / (ctrl_hi - ctrl_lo) - 1.0
+    return xp.concatenate([
+        goal_vec / xp.maximum(dist, 1e-6), xp.minimum(dist, distance_cap)[None],
+        qpos[2:3],
+        to_heading_frame(qvel[:2], heading), qvel[2:3],
+        qvel[3:6],
+        rotate(xp.asarray(GRAVITY_WORLD, dtype=quat.dtype), conj),
+        qpos[7:], qvel[6:],
+        last_action,
+    ])
+
+
+def _layout(parts):
+    """(start, end, what, units) of each (what, units, size) in order."""
+    out, start = [], 0
+    for what, units, size in parts:
+        out.append((start, start + size, what, units))
+        start += size
+    return out
+
+
+_JOINTS = [("joint angles, hinge order of the model", "rad", 18), ("joint velocities", "rad/s", 18)]
+
+# Every slice of each task's observation, with units.
+LAYOUTS: dict[str, list[tuple[int, int, str, str]]] = {
+    "goal": _layout([
+        ("torso position, world", "m", 3), ("torso quaternion (w, x, y, z), world", "", 4),
+        ("torso linear velocity, world", "m/s", 3), ("torso angular velocity, world", "rad/s", 3),
+        *_JOINTS, ("goal minus torso (x, y), world", "m", 2), ("goal distance", "m", 1)]),
+    "navigate": _layout([
+        ("goal direction (x, y), heading frame, unit vector", "", 2),
+        ("goal distance, capped at the trained range's end", "m", 1), ("torso height", "m", 1),
+        ("torso linear velocity (x, y) heading frame, z world", "m/s", 3),
+        ("torso angular velocity, body frame", "rad/s", 3), ("gravity direction, body frame", "", 3),
+        *_JOINTS, ("previous action (control targets mapped back to [-1, 1])", "", 18)]),
+}
