@@ -1,13 +1,11 @@
 """Evaluate a checkpoint: batched deterministic episodes on MJX, a metrics table, off-screen video.
 
-`eval.py` is the command-line face of `evaluate(...)` and `render_video(...)`.
+`eval.py` is the command-line face of `evaluate(...)`; videos come from `hexa_mjx.video`.
 """
 
 from __future__ import annotations
 
 import json
-import os
-import warnings
 from pathlib import Path
 
 import jax
@@ -15,8 +13,7 @@ import jax.numpy as jp
 import numpy as np
 
 from hexa_mjx import checkpoints, config, nav_metrics, plots, robot, training
-
-GL_PACKAGES = "libegl1 libegl-mesa0 libosmesa6"  # Debian/Ubuntu
+from hexa_mjx.video import VIDEO_FPS, render_video
 
 
 CONTACT_GROUPS = ("torso", "hip and knee links", "shins", "feet")
@@ -229,75 +226,6 @@ def navigation_rows(summary: dict) -> list[tuple[str, str]]:
                  ("largest deviation from the path, mean (median)",
                   f"{path['max_deviation_mean']:.3f} m ({path['max_deviation_median']:.3f} m)")]
     return rows
-
-
-VIDEO_FPS = 30  # frames per second of eval's videos (real time: every ctrl_hz / 30th control step)
-
-
-def render_video(env, qpos_frames: np.ndarray, path: Path, goals: np.ndarray, waypoints=(), width=640,
-                 height=480, fps: float = VIDEO_FPS, shadows: bool = False) -> int:
-    """Render qpos frames (T, nq, one per control step) from the tracking camera into a real-time
-    MP4 of about `fps` frames per second, with the goal marker at each frame's goal (T, 2) and the
-    waypoint path (start -> waypoints) drawn. Returns the number of frames written.
-
-    Shadows and the skybox are off unless `shadows`: with software OpenGL (no GPU) they cost 5x
-    the frame rate (docs/RESULTS.md, "Evaluation time")."""
-    import imageio.v2 as imageio
-    import mujoco
-
-    model = env.mj_model
-    data = mujoco.MjData(model)
-    mocap = model.body_mocapid[model.body(robot.GOAL_BODY).id]
-    if not os.environ.get("MUJOCO_GL"):
-        raise RuntimeError(f"no off-screen OpenGL found (neither EGL nor OSMesa): install it with "
-                           f"`apt-get install {GL_PACKAGES}`, or pass --no-video")
-    try:
-        renderer = mujoco.Renderer(model, height=height, width=width)
-    except Exception as e:
-        backend = os.environ.get("MUJOCO_GL", "none")
-        raise RuntimeError(
-            f"off-screen OpenGL ({backend}) is not usable: {e}. Install it with "
-            f"`apt-get install {GL_PACKAGES}` (or try MUJOCO_GL=osmesa), "
-            "or pass --no-video") from e
-    corners = np.vstack([qpos_frames[0, :2], np.asarray(waypoints, float).reshape(-1, 2) + env.qpos0[:2]])
-    stride = max(int(round(1 / (env.dt * fps))), 1)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.stem + ".tmp" + path.suffix)
-    written = 0
-    # The encoder is an ffmpeg subprocess. JAX warns on any fork in a threaded process; subprocess's
-    # fork is followed at once by exec in C, which is safe, so that warning is noise here.
-    warnings.filterwarnings("ignore", message=r"os\.fork\(\) was called", category=RuntimeWarning)
-    with imageio.get_writer(tmp, fps=1 / (env.dt * stride), codec="libx264", quality=7,
-                            macro_block_size=16) as writer:
-        for qpos, goal in zip(qpos_frames[::stride], goals[::stride]):
-            data.qpos[:] = qpos
-            data.mocap_pos[mocap, :2] = goal
-            mujoco.mj_forward(model, data)
-            renderer.update_scene(data, camera=robot.TRACKING_CAMERA)
-            renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = shadows
-            renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = shadows
-            if waypoints:
-                draw_path(renderer.scene, corners)
-            writer.append_data(renderer.render())
-            written += 1
-    renderer.close()
-    tmp.replace(path)
-    return written
-
-
-def draw_path(scene, corners: np.ndarray, width=0.01, height=0.003) -> None:
-    """Add the polyline through `corners` (x, y on the floor, m) to a MuJoCo scene as thin capsules."""
-    import mujoco
-
-    for a, b in zip(corners[:-1], corners[1:]):
-        if scene.ngeom >= scene.maxgeom:
-            return
-        geom = scene.geoms[scene.ngeom]
-        mujoco.mjv_initGeom(geom, mujoco.mjtGeom.mjGEOM_CAPSULE, np.zeros(3), np.zeros(3), np.eye(3).ravel(),
-                            np.array([0.9, 0.5, 0.1, 1.0], np.float32))
-        mujoco.mjv_connector(geom, mujoco.mjtGeom.mjGEOM_CAPSULE, width, np.array([*a, height]),
-                             np.array([*b, height]))
-        scene.ngeom += 1
 
 
 def evaluate(ckpt: str | Path, episodes: int = 128, videos: int = 1, out: str | Path | None = None,

@@ -128,6 +128,12 @@ VARIANTS: dict[str, dict[str, float]] = {
                        "forward_progress": 1000.0, "forward_velocity": 5.0, **_SHAPING},
 }
 
+# Each task's reward variants, its default first.
+TASK_REWARDS: dict[str, tuple[str, ...]] = {
+    "goal": ("goal_directed", "forward_motion"),
+    "navigate": ("navigate",),
+}
+
 ABLATIONS: dict[str, tuple[str, ...]] = {
     "contact": ("contact_quality", "body_contact"),
     "height": ("height",),

@@ -14,7 +14,7 @@ import jax
 import numpy as np
 import pytest
 
-from hexa_mjx import checkpoints, config, evaluation, training
+from hexa_mjx import checkpoints, config, evaluation, training, video
 
 ROOT = Path(__file__).resolve().parent.parent
 # A tiny rollout shape: 8 envs x 4 steps x 2 minibatches = 64 env steps per update.
@@ -245,7 +245,7 @@ def test_eval_rejects_corrupted_checkpoint(trained, tmp_path):
 def test_missing_opengl_names_the_package(env, monkeypatch, tmp_path):
     monkeypatch.delenv("MUJOCO_GL", raising=False)
     with pytest.raises(RuntimeError, match="apt-get install libegl1 libegl-mesa0 libosmesa6"):
-        evaluation.render_video(env, np.zeros((2, env.mj_model.nq)), tmp_path / "x.mp4", np.zeros((2, 2)))
+        video.render_video(env, np.zeros((2, env.mj_model.nq)), tmp_path / "x.mp4", np.zeros((2, 2)))
 
 
 def test_navigation_input_errors_come_before_compiling(trained, tmp_path):

@@ -8,13 +8,14 @@ from mujoco import mjx
 
 from hexa_mjx.env import HexapodEnv
 from hexa_mjx.observations import goal_observation
+from hexa_mjx.rewards import TASK_REWARDS
 
 
 class GoalEnv(HexapodEnv):
     """One goal on +x; the report's 52-D observation (hexa_mjx.observations.LAYOUTS["goal"])."""
 
     name = "goal"
-    rewards = ("goal_directed", "forward_motion")
+    rewards = TASK_REWARDS["goal"]
 
     def first_goal(self, qpos: jax.Array, rng: jax.Array) -> jax.Array:
         return self._start_xy + jp.array([self.config.goal_distance, 0.0])

@@ -13,12 +13,13 @@ from mujoco import mjx
 
 from hexa_mjx.env import HexapodEnv
 from hexa_mjx.observations import navigate_observation
+from hexa_mjx.rewards import TASK_REWARDS
 
 class NavigateEnv(HexapodEnv):
     """Goals at a uniform bearing and distance; on arrival the next one is drawn."""
 
     name = "navigate"
-    rewards = ("navigate",)
+    rewards = TASK_REWARDS["navigate"]
     start_yaw_range = np.pi  # every episode starts from a heading uniform over 360 degrees
 
     def first_goal(self, qpos: jax.Array, rng: jax.Array) -> jax.Array:

@@ -1,0 +1,182 @@
+"""The hexapod's tasks on native MuJoCo (C), with NumPy: no JAX anywhere on this path.
+
+`NativeEnv` runs a task as the MJX environment does: the same settled start and start noise,
+action-to-target mapping, control rate, observation (`hexa_mjx.observations`), reward terms and
+scales (`hexa_mjx.rewards`), contact rules (`hexa_mjx.model`), termination and goal chaining.
+Only the engine differs, and the random draws (NumPy's generator instead of JAX's keys).
+play.py and the Gymnasium environments are built on it.
+
+    env = NativeEnv(EnvConfig(task="navigate"))
+    obs = env.reset(seed=0)
+    obs, reward, terminated, truncated, info = env.step(action)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import mujoco
+import numpy as np
+
+from hexa_mjx import rewards
+from hexa_mjx.env_config import EnvConfig, check_config
+from hexa_mjx.kinematics import fell, quat_mul
+from hexa_mjx.model import RobotModel, action_to_ctrl
+from hexa_mjx.observations import LAYOUTS, goal_observation, navigate_observation
+
+TASKS = tuple(LAYOUTS)
+
+
+class NativeEnv:
+    """One environment of a task on MuJoCo C; `observe_as` names another task's observation."""
+
+    def __init__(self, config: EnvConfig = EnvConfig(), observe_as: str = ""):
+        if config.task not in TASKS:
+            raise ValueError(f"unknown task {config.task!r}; choose one of {list(TASKS)}")
+        if observe_as and observe_as not in TASKS:
+            raise ValueError(f"unknown task {observe_as!r} to observe as; choose one of {list(TASKS)}")
+        check_config(config)
+        config = dataclasses.replace(config, reward=config.reward or rewards.TASK_REWARDS[config.task][0])
+        if config.reward not in rewards.TASK_REWARDS[config.task]:
+            raise ValueError(f"reward {config.reward!r} is not one of the {config.task} task's: "
+                             f"{list(rewards.TASK_REWARDS[config.task])}")
+        self.config, self.observe_as = config, observe_as or config.task
+        self.scales = rewards.make_scales(config.reward, config.ablate, config.reward_scales)
+        self.active = [name for name, scale in self.scales.items() if scale != 0.0]
+        self.robot = RobotModel(config)
+        self.mj_model, self.n_substeps = self.robot.mj_model, self.robot.n_substeps
+        self.qpos0 = self.robot.qpos0
+        self.data = mujoco.MjData(self.mj_model)
+        self.rng = np.random.default_rng()
+        self.t = self.goals = 0
+        self.success = False
+
+    @property
+    def dt(self) -> float:
+        """Control period, s."""
+        return self.n_substeps * float(self.mj_model.opt.timestep)
+
+    @property
+    def observation_size(self) -> int:
+        return LAYOUTS[self.observe_as][-1][1]
+
+    @property
+    def action_size(self) -> int:
+        return self.mj_model.nu
+
+    @property
+    def start_yaw_range(self) -> float:
+        """rad; the navigation task turns every start uniformly over 360 degrees."""
+        return np.pi if self.config.task == "navigate" else self.config.start_yaw_noise
+
+    @property
+    def goal(self) -> np.ndarray:
+        """The current goal's (x, y), m, world frame: the `goal` mocap body, which the viewer can drag."""
+        return self.data.mocap_pos[self.robot.goal_mocap, :2].copy()
+
+    def set_goal(self, goal_xy) -> None:
+        self.data.mocap_pos[self.robot.goal_mocap, :2] = goal_xy
+
+    def goal_distance(self) -> float:
+        return float(np.linalg.norm(self.goal - self.data.qpos[:2]))
+
+    def reset(self, seed: int | None = None) -> np.ndarray:
+        """Start an episode from the settled pose with this task's start noise; returns the observation."""
+        if seed is not None:
+            self.rng = np.random.default_rng(seed)
+        data, robot = self.data, self.robot
+        mujoco.mj_resetData(self.mj_model, data)
+        qpos = robot.qpos0.copy()
+        noise = self.config.start_joint_noise
+        if noise:
+            qpos[7:] = np.clip(qpos[7:] + self.rng.uniform(-noise, noise, qpos[7:].shape), robot.joint_lo, robot.joint_hi)
+        if self.start_yaw_range:
+            half_yaw = 0.5 * self.rng.uniform(-1.0, 1.0) * self.start_yaw_range
+            qpos[3:7] = quat_mul(np.array([np.cos(half_yaw), 0.0, 0.0, np.sin(half_yaw)]), qpos[3:7])
+        data.qpos[:], data.qvel[:], data.ctrl[:] = qpos, robot.qvel0, robot.ctrl0
+        self.t = self.goals = 0
+        self.success = False
+        self.set_goal(self._first_goal())
+        mujoco.mj_forward(self.mj_model, data)
+        return self.observe()
+
+    def observe(self) -> np.ndarray:
+        d = self.data
+        if self.observe_as == "goal":
+            obs = goal_observation(d.qpos, d.qvel, self.goal)
+        else:
+            cap = self.config.goal_distance_cap or self.config.goal_max_distance
+            obs = navigate_observation(d.qpos, d.qvel, d.ctrl, self.goal, self.robot.ctrl_lo, self.robot.ctrl_hi, cap)
+        return obs.astype(np.float32)
+
+    def step(self, action) -> tuple[np.ndarray, float, bool, bool, dict]:
+        """One control step: targets from `action` in [-1, 1], `n_substeps` physics steps.
+        Returns (observation, reward, terminated (fell or diverged), truncated (time limit), info);
+        info holds the unscaled terms ("terms"), the distance, success, goals reached and falls."""
+        action = np.asarray(action, np.float64)
+        if action.shape != (self.action_size,):
+            raise ValueError(f"action must have shape ({self.action_size},), got {action.shape}")
+        model, data = self.mj_model, self.data
+        prev_qpos, prev_qvel = data.qpos.copy(), data.qvel.copy()
+        data.ctrl[:] = action_to_ctrl(np.nan_to_num(action), self.robot.ctrl_lo, self.robot.ctrl_hi)
+        for _ in range(self.n_substeps):
+            mujoco.mj_step(model, data)
+        finite = bool(np.isfinite(data.qpos).all() and np.isfinite(data.qvel).all())
+        if not finite:  # as in MJX: keep the last finite state and end the episode
+            data.qpos[:], data.qvel[:] = prev_qpos, prev_qvel
+            mujoco.mj_forward(model, data)
+        fallen = bool(fell(data.qpos[3:7]))
+        done = fallen or not finite
+        goal = self.goal
+        dist = float(np.linalg.norm(goal - data.qpos[:2]))
+        reached = dist < self.config.success_radius
+        completed = self._goal_completed(reached)
+        bad, non_foot = self.contact_counts()
+        terms = rewards.terms(self.active, self.config, prev_qpos, data.qpos, data.qvel, goal, bad, non_foot,
+                              np.bool_(done), np.bool_(completed))
+        reward = float(sum(self.scales[name] * value for name, value in terms.items()))
+        self.t += 1
+        if completed:
+            self.goals += 1
+            self.set_goal(self._next_goal())
+        self.success |= reached
+        info = {"terms": {name: float(v) for name, v in terms.items()}, "distance": dist, "success": self.success,
+                "goals_reached": self.goals, "fell": fallen, "nonfinite": not finite, "feet_only": int(non_foot) == 0}
+        return self.observe(), reward, done, self.t >= self.config.episode_length, info
+
+    def new_goal(self) -> np.ndarray:
+        """A goal as the task draws them: the report's fixed goal, the next waypoint, or a random one."""
+        if self.config.task == "goal":
+            return self._first_goal()
+        return self._next_goal()
+
+    def contact_counts(self) -> tuple[int, int]:
+        """(leg contacts while that foot is lifted, non-foot contacts) with the floor, now."""
+        c, feet = self.data.contact, self.robot.feet
+        return self.robot.contact_counts(c.geom1, c.geom2, c.dist, self.data.geom_xpos[feet, 2],
+                                         self.config.lift_clearance)
+
+    # -- goals, as the task modules in hexa_mjx.tasks draw them ------------------
+
+    def _first_goal(self) -> np.ndarray:
+        if self.config.task == "goal":
+            return self.robot.start_xy + np.array([self.config.goal_distance, 0.0])
+        if self.config.waypoints:
+            return self.robot.start_xy + np.asarray(self.config.waypoints[0], float)
+        return self._draw_goal()
+
+    def _goal_completed(self, reached: bool) -> bool:
+        if self.config.task == "goal":
+            return False
+        return reached and (not self.config.waypoints or self.goals < len(self.config.waypoints))
+
+    def _next_goal(self) -> np.ndarray:
+        if self.config.waypoints:
+            last = min(self.goals, len(self.config.waypoints) - 1)
+            return self.robot.start_xy + np.asarray(self.config.waypoints[last], float)
+        return self._draw_goal()
+
+    def _draw_goal(self) -> np.ndarray:
+        bearing = self.rng.uniform(-np.pi, np.pi)
+        dist = self.rng.uniform(self.config.goal_min_distance, self.config.goal_max_distance)
+        return self.data.qpos[:2] + dist * np.array([np.cos(bearing), np.sin(bearing)])

@@ -1,0 +1,133 @@
+"""Run a trained policy on native MuJoCo, outside the trainer: results, an MP4, or the live viewer.
+
+    python play.py --policy policies/goal.onnx                       # one episode -> play-goal.mp4
+    python play.py --policy policies/navigate.onnx --episodes 20 --json results.json --no_video
+    python play.py --policy policies/navigate.onnx --waypoints "2,0 2,2 0,2 0,0" --episode_length 1500
+    python play.py --policy policies/navigate.onnx --viewer          # drag the goal around
+    python play.py --policy runs/goal_directed-s0                    # a run or checkpoint (exports it first)
+
+With an ONNX file, this imports only mujoco, onnxruntime and NumPy (and imageio for the video).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--policy", required=True, help="exported .onnx file, run directory or checkpoint folder")
+    p.add_argument("--episodes", type=int, default=1, help="episodes to run (each from its own seeded start)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the first episode's start and goals")
+    p.add_argument("--json", default="", help="write per-episode results and a summary to this file")
+    p.add_argument("--video", default="", help="MP4 of the first episode (default play-<policy name>.mp4)")
+    p.add_argument("--no_video", action="store_true", help="write no video")
+    p.add_argument("--viewer", action="store_true", help="open MuJoCo's interactive viewer (needs a display)")
+    p.add_argument("--model", default=None, help="MJCF model (default: the project's models/hexapod.xml)")
+    p.add_argument("--episode_length", type=int, default=None, help="control steps per episode (default: trained)")
+    p.add_argument("--goal_distance", type=float, default=None, help="goal task: m ahead of the start")
+    p.add_argument("--goal_min_distance", type=float, default=None, help="navigate: m, nearest goal drawn")
+    p.add_argument("--goal_max_distance", type=float, default=None, help="navigate: m, farthest goal drawn")
+    p.add_argument("--waypoints", default="", help='navigate: a path "x,y x,y ..." in m from the start, or a file')
+    p.add_argument("--start_joint_noise", type=float, default=None, help="rad, start-angle noise (default: trained)")
+    args = p.parse_args(argv)
+    if args.episodes < 1:
+        p.error(f"--episodes must be at least 1, got {args.episodes}")
+    if args.viewer and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        p.error("--viewer needs a display, and neither DISPLAY nor WAYLAND_DISPLAY is set: run without --viewer "
+                "to write an MP4, or start it under a display (for example `xvfb-run python play.py ...`)")
+    return args
+
+
+def waypoints_of(text: str) -> tuple:
+    """Waypoints from "x,y x,y ..." or a file holding that text."""
+    if not text:
+        return ()
+    if Path(text).is_file():
+        text = Path(text).read_text()
+    try:
+        return tuple(tuple(float(c) for c in point.split(",")) for point in text.replace("\n", " ").split())
+    except ValueError:
+        raise ValueError(f'waypoints are "x,y x,y ..." in metres, got {text!r}') from None
+
+
+def onnx_file(policy: str, scratch: str) -> Path:
+    """The ONNX file to play: the file itself, or a run/checkpoint exported into `scratch`."""
+    path = Path(policy)
+    if path.is_dir():
+        from hexa_mjx import export, jax_setup
+
+        jax_setup.prepare_jax()
+        print(f"exporting {path} to ONNX ...", flush=True)
+        return export.export(path, Path(scratch) / f"{path.resolve().name}.onnx")
+    if not path.is_file():
+        raise FileNotFoundError(f"--policy {path} is neither an ONNX file nor a run or checkpoint directory")
+    return path
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    if args.viewer:
+        os.environ["MUJOCO_GL"] = "glfw"  # the window's OpenGL, not the off-screen default
+    from hexa_mjx import player, video
+
+    try:
+        with tempfile.TemporaryDirectory() as scratch:
+            policy = player.OnnxPolicy(onnx_file(args.policy, scratch))
+        overrides = dict(episode_length=args.episode_length, goal_distance=args.goal_distance,
+                         goal_min_distance=args.goal_min_distance, goal_max_distance=args.goal_max_distance,
+                         start_joint_noise=args.start_joint_noise, waypoints=waypoints_of(args.waypoints) or None)
+        if args.waypoints and policy.metadata["task"] != "navigate":
+            raise ValueError("--waypoints is a navigate-task option; this is a goal-task policy")
+        env = player.env_for(policy, args.model, **overrides)
+        if args.json:
+            out = Path(args.json)
+            if out.is_dir():
+                raise ValueError(f"--json {out} is a folder; name a file")
+            out.parent.mkdir(parents=True, exist_ok=True)
+        if not player.model_matches(policy, env):
+            print(f"note: {env.config.model_path} differs from the model the policy was trained on", file=sys.stderr)
+    except (FileNotFoundError, ValueError, OSError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+
+    task = policy.metadata["task"]
+    if args.viewer:
+        print("viewer: double-click the goal and Ctrl+right-drag to move it; I/J/K/L move it 0.25 m, N draws a new "
+              "goal, R restarts; close the window to stop")
+        player.view(policy, env, args.seed)
+        return 0
+
+    print(f"{policy.path}: {task} policy on native MuJoCo, {args.episodes} episode(s)")
+    episodes = []
+    for i in range(args.episodes):
+        ep = player.run_episode(policy, env, args.seed + i, record=(i == 0 and not args.no_video))
+        episodes.append(ep)
+        print(f"episode {i:3d}: {'success' if ep['success'] else 'no success':10s} final distance "
+              f"{ep['final_distance']:.2f} m  goals {ep['goals_reached']:2d}  {'fell' if ep['fell'] else 'upright'}  "
+              f"feet only {ep['feet_only_share']:.0%} of {ep['steps']} steps")
+    s = player.summarize(episodes)
+    print(f"summary: success {s['success_rate']:.0%}, falls {s['fall_rate']:.0%}, final distance "
+          f"{s['final_distance_mean']:.2f} m, goals/episode {s['goals_per_episode']:.1f}, feet only "
+          f"{s['feet_only_share']:.1%} of steps")
+    if args.json:
+        player.write_json(Path(args.json), policy, env, episodes)
+        print(f"wrote {args.json}")
+    if not args.no_video:
+        path = Path(args.video or f"play-{policy.path.stem}.mp4")
+        traj = episodes[0]["trajectory"]
+        try:
+            video.render_video(env, traj["qpos"], path, traj["goal"], env.config.waypoints)
+        except RuntimeError as e:
+            print(f"error: {e}", file=sys.stderr)
+            return 2
+        print(f"wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
