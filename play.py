@@ -34,6 +34,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--goal_max_distance", type=float, default=None, help="navigate: m, farthest goal drawn")
     p.add_argument("--waypoints", default="", help='navigate: a path "x,y x,y ..." in m from the start, or a file')
     p.add_argument("--start_joint_noise", type=float, default=None, help="rad, start-angle noise (default: trained)")
+    p.add_argument("--start_yaw_noise", type=float, default=None, help="goal task: rad, start-heading noise")
+    p.add_argument("--benchmark", action="store_true", help="time the policy alone (one observation per call, "
+                   "one thread) and exit")
     args = p.parse_args(argv)
     if args.episodes < 1:
         p.error(f"--episodes must be at least 1, got {args.episodes}")
@@ -80,7 +83,8 @@ def main(argv=None) -> int:
             policy = player.OnnxPolicy(onnx_file(args.policy, scratch))
         overrides = dict(episode_length=args.episode_length, goal_distance=args.goal_distance,
                          goal_min_distance=args.goal_min_distance, goal_max_distance=args.goal_max_distance,
-                         start_joint_noise=args.start_joint_noise, waypoints=waypoints_of(args.waypoints) or None)
+                         start_joint_noise=args.start_joint_noise, start_yaw_noise=args.start_yaw_noise,
+                         waypoints=waypoints_of(args.waypoints) or None)
         if args.waypoints and policy.metadata["task"] != "navigate":
             raise ValueError("--waypoints is a navigate-task option; this is a goal-task policy")
         env = player.env_for(policy, args.model, **overrides)
@@ -96,6 +100,12 @@ def main(argv=None) -> int:
         return 2
 
     task = policy.metadata["task"]
+    if args.benchmark:
+        rates = player.inference_rates(policy, env.observe())
+        print(f"{policy.path}: {sorted(rates)[len(rates) // 2]:,.0f} policy steps/s on one thread (median of "
+              f"{len(rates)} runs of 2,000 calls; {min(rates):,.0f} to {max(rates):,.0f}); the robot needs "
+              f"{policy.metadata['control_hz']:g}")
+        return 0
     if args.viewer:
         print("viewer: double-click the goal and Ctrl+right-drag to move it; I/J/K/L move it 0.25 m, N draws a new "
               "goal, R restarts; close the window to stop")

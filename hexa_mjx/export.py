@@ -33,10 +33,19 @@ def policy_arrays(policy_dist: str, params) -> dict:
     """NumPy arrays of the deterministic actor: normalizer mean and std, [(kernel, bias)] of every
     layer (tanh between them), and whether the output is squashed by tanh (brax's tanh_normal)."""
     normalizer, policy = params[0], params[1]["params"]
-    hidden = sorted(policy["MLP_0"], key=lambda name: int(name.split("_")[-1]))
-    layers = [policy["MLP_0"][name] for name in hidden] + [policy["Dense_0"]]
+
+    def by_index(tree):
+        return [tree[name] for name in sorted(tree, key=lambda name: int(name.split("_")[-1]))]
+
+    if "MLP_0" in policy:  # brax's "normal" actor: an MLP, then a mean layer (the std is a parameter)
+        layers = [(l["kernel"], l["bias"]) for l in by_index(policy["MLP_0"]) + [policy["Dense_0"]]]
+    else:  # "tanh_normal": one MLP whose last layer outputs (loc, scale); the mode is tanh(loc)
+        layers = [(l["kernel"], l["bias"]) for l in by_index(policy)]
+        kernel, bias = layers[-1]
+        half = kernel.shape[1] // 2
+        layers[-1] = (kernel[:, :half], bias[:half])
     return {"mean": np.asarray(normalizer.mean, np.float32), "std": np.asarray(normalizer.std, np.float32),
-            "layers": [(np.asarray(l["kernel"], np.float32), np.asarray(l["bias"], np.float32)) for l in layers],
+            "layers": [(np.asarray(k, np.float32), np.asarray(b, np.float32)) for k, b in layers],
             "squash": policy_dist == "tanh_normal"}
 
 

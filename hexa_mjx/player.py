@@ -16,6 +16,7 @@ import numpy as np
 from hexa_mjx.env_config import EnvConfig
 from hexa_mjx.export import FORMAT, METADATA_KEY
 from hexa_mjx.native import NativeEnv
+from hexa_mjx.observations import LAYOUTS
 
 
 class OnnxPolicy:
@@ -58,6 +59,12 @@ def env_for(policy: OnnxPolicy, model_path: str | Path | None = None, **override
     """The native environment a policy was trained on, with `EnvConfig` overrides (goal range,
     waypoints, episode length...); checks that the model's joints and observation match the policy."""
     meta = policy.metadata
+    task = meta["env_config"].get("task")
+    if task not in LAYOUTS:
+        raise ValueError(f"{policy.path} is a policy for task {task!r}; this version knows {list(LAYOUTS)}")
+    if LAYOUTS[task][-1][1] != meta["observation_size"]:
+        raise ValueError(f"the {task} task observes {LAYOUTS[task][-1][1]} values, the policy {policy.path} "
+                         f"expects {meta['observation_size']}: it was exported for another task or version")
     settings = {**meta["env_config"], **{k: v for k, v in overrides.items() if v is not None}}
     settings["ablate"] = tuple(settings.get("ablate", ()))
     settings["waypoints"] = tuple(tuple(float(c) for c in p) for p in settings.get("waypoints", ()))
@@ -70,9 +77,6 @@ def env_for(policy: OnnxPolicy, model_path: str | Path | None = None, **override
     if joints != meta["joint_order"]:
         raise ValueError(f"the model {env.config.model_path} drives joints {joints}, but the policy "
                          f"{policy.path} was trained on {meta['joint_order']}; use the model it was trained on")
-    if env.observation_size != meta["observation_size"]:
-        raise ValueError(f"the {meta['task']} task observes {env.observation_size} values on this model, the "
-                         f"policy expects {meta['observation_size']}")
     return env
 
 
@@ -130,6 +134,20 @@ def write_json(path: Path, policy: OnnxPolicy, env: NativeEnv, episodes: list[di
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(json.dumps(doc, indent=1))
     tmp.replace(path)
+
+
+def inference_rates(policy: OnnxPolicy, obs: np.ndarray, calls: int = 2000, repeats: int = 5) -> list[float]:
+    """Policy calls per second, one observation per call as a controller makes them, per repeat."""
+    import time
+
+    policy(obs)  # warm-up
+    rates = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        for _ in range(calls):
+            policy(obs)
+        rates.append(calls / (time.perf_counter() - start))
+    return rates
 
 
 # Viewer keys (GLFW key codes): move the goal in the world's x/y plane, or draw a new one.

@@ -1,0 +1,220 @@
+"""Outside the trainer: ONNX export, the native-MuJoCo engine and player, Gymnasium, shipped policies."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import jax
+import jax.numpy as jp
+import mujoco
+import numpy as np
+import pytest
+
+from hexa_mjx import checkpoints, config, export, player, robot, training
+from hexa_mjx.benchmark import gait_actions
+from hexa_mjx.native import NativeEnv
+
+POLICIES = robot.REPO_ROOT / "policies"
+SHIPPED = ("goal", "navigate")
+
+
+@pytest.fixture(scope="module")
+def shipped():
+    """(config, params, ONNX policy) of each shipped policy, by task."""
+    out = {}
+    for task in SHIPPED:
+        run_dir, ckpt = checkpoints.resolve_checkpoint(POLICIES / task)
+        cfg = config.load_config(run_dir)
+        _, params = checkpoints.load_checkpoint(ckpt, training.init_params(cfg, config.make_env_for(cfg)))
+        out[task] = (cfg, params, player.OnnxPolicy(POLICIES / f"{task}.onnx"))
+    return out
+
+
+def copy_state(native, data) -> None:
+    """Put an MJX state (and its goal) into a native environment."""
+    d = native.data
+    for name in ("qpos", "qvel", "ctrl", "mocap_pos", "qacc_warmstart"):
+        getattr(d, name)[:] = np.asarray(getattr(data, name))
+    mujoco.mj_forward(native.mj_model, d)
+
+
+@pytest.mark.parametrize("task", SHIPPED)
+def test_onnx_matches_the_jax_policy(shipped, task):
+    cfg, params, policy = shipped[task]
+    env = config.make_env_for(cfg)
+    act = jax.jit(jax.vmap(training.make_inference(cfg, env, params), in_axes=(0, None)))
+    # 1,000 observations spread like the ones training saw (the normalizer's statistics).
+    rng = np.random.default_rng(0)
+    normalizer = params[0]
+    obs = (np.asarray(normalizer.mean) + 2 * np.asarray(normalizer.std) * rng.normal(size=(1000, env.observation_size)))
+    obs = obs.astype(np.float32)
+    expected = np.clip(np.asarray(act(obs, jax.random.PRNGKey(0))), -1, 1)
+    assert 0.05 < np.mean(np.abs(expected) == 1) < 0.95  # saturated and unsaturated actions both occur
+    np.testing.assert_allclose(policy(obs), expected, atol=1e-5, rtol=0)
+
+
+def test_export_writes_metadata_a_deployer_needs(tmp_path):
+    out = export.export(POLICIES / "goal", tmp_path / "p.onnx")
+    meta = export.read_metadata(out)
+    assert meta == json.loads(out.with_suffix(".json").read_text())
+    assert meta["task"] == "goal" and meta["control_hz"] == 60.0 and meta["observation_size"] == 52
+    assert meta["observation_layout"][-1]["end"] == 52 and meta["observation_layout"][0]["units"] == "m"
+    assert meta["joint_order"] == list(robot.JOINT_NAMES)
+    lo, hi = np.array(meta["action_mapping"]["ctrl_lo"]), np.array(meta["action_mapping"]["ctrl_hi"])
+    model = mujoco.MjModel.from_xml_path(str(robot.MODEL_XML))
+    np.testing.assert_allclose(np.stack([lo, hi], 1), model.actuator_ctrlrange, atol=1e-6)
+    # The same policy as the shipped file: exporting is deterministic.
+    obs = np.random.default_rng(1).normal(size=(8, 52)).astype(np.float32)
+    np.testing.assert_array_equal(player.OnnxPolicy(out)(obs), player.OnnxPolicy(POLICIES / "goal.onnx")(obs))
+
+
+def test_tanh_policy_and_deeper_networks_export(env):
+    cfg = config.TrainConfig(hidden=[32, 16, 8], policy_dist="tanh_normal", mean_init_scale=1.0, seed=3)
+    params = training.init_params(cfg, env)
+    model = export.onnx_model(export.policy_arrays(cfg.policy_dist, params), {"format": export.FORMAT})
+    import onnxruntime as ort
+
+    obs = np.random.default_rng(2).normal(size=(100, 52)).astype(np.float32)
+    got = ort.InferenceSession(model.SerializeToString(), providers=["CPUExecutionProvider"]).run(None, {"obs": obs})[0]
+    expected = np.asarray(jax.vmap(training.make_inference(cfg, env, params), in_axes=(0, None))(obs, jax.random.PRNGKey(0)))
+    np.testing.assert_allclose(got, expected, atol=1e-5, rtol=0)
+
+
+def test_native_rewards_match_mjx_from_the_same_state(env, step, state0):
+    """For the same action from the same state, the native engine's reward and terms equal MJX's:
+    on most steps to float precision; on steps with a foot impact the engines' contact solutions
+    differ slightly (joint velocities by up to ~0.3 rad/s), so the reward is within 2% + 0.05."""
+    native = NativeEnv(env.config)
+    native.reset(seed=0)
+    state, gaps = state0, []
+    for t, action in enumerate(gait_actions(90, env.dt)):
+        sample = t % 6 == 0  # from this MJX state, one step in each engine
+        if sample:
+            copy_state(native, state.pipeline_state)
+            _, reward, terminated, _, info = native.step(action)
+        state = step(state, jp.asarray(action, jp.float32))
+        if sample:
+            assert reward == pytest.approx(float(state.reward), rel=0.02, abs=0.05), t
+            gaps.append(abs(reward - float(state.reward)))
+            for name in ("contact_quality", "body_contact", "termination", "goal_bonus"):
+                assert info["terms"][name] == float(state.metrics[f"reward/{name}"]) / env.scales[name], (t, name)
+            assert terminated == bool(state.done)
+    assert len(gaps) == 15 and np.median(gaps) < 1e-3
+
+
+def test_player_follows_the_mjx_rollout(env, step, state0, shipped):
+    """Same start, same policy: the native trajectory matches MJX's closely for the first 0.25 s,
+    and both reach the goal; after that, contact events diverge (docs/RESULTS.md, "Native MuJoCo")."""
+    cfg, params, policy = shipped["goal"]
+    act = jax.jit(training.make_inference(cfg, env, params))
+    native = player.env_for(policy)
+    obs = native.reset(seed=0)
+    np.testing.assert_allclose(obs, np.asarray(state0.obs), atol=1e-6)
+    state, gaps = state0, []
+    for t in range(600):  # 10 s
+        state = step(state, act(state.obs, jax.random.PRNGKey(0)))
+        obs, _, _, _, info = native.step(policy(obs))
+        gaps.append(np.abs(native.data.qpos[:2] - np.asarray(state.pipeline_state.qpos[:2])).max())
+    assert max(gaps[:15]) < 0.002  # m, first 0.25 s
+    assert info["success"] and bool(state.info["success"])
+    assert abs(info["distance"] - float(env.goal_distance(state.pipeline_state))) < 0.15  # m
+
+
+@pytest.mark.parametrize("task,episodes", [("goal", 2), ("navigate", 6)])
+def test_shipped_policies_succeed_on_the_current_model(shipped, task, episodes):
+    policy = shipped[task][2]
+    env = player.env_for(policy)
+    results = [player.run_episode(policy, env, seed) for seed in range(episodes)]
+    summary = player.summarize(results)
+    assert summary["success_rate"] >= 0.9 and summary["fall_rate"] == 0.0, summary
+    if task == "navigate":
+        assert summary["goals_per_episode"] >= 5
+
+
+def run_play(*args, env=None):
+    return subprocess.run([sys.executable, str(robot.REPO_ROOT / "play.py"), *args], capture_output=True, text=True,
+                          env=env, cwd=robot.REPO_ROOT)
+
+
+def test_play_writes_results_and_imports_no_jax(tmp_path):
+    out = tmp_path / "r.json"
+    code = ("import runpy, sys; sys.argv = ['play.py'] + sys.argv[1:]\n"
+            "try:\n    runpy.run_path('play.py', run_name='__main__')\nexcept SystemExit as e:\n    assert not e.code\n"
+            "heavy = sorted({m.split('.')[0] for m in sys.modules} & {'jax', 'jaxlib', 'brax', 'flax', 'optax', 'orbax'})\n"
+            "print('heavy modules:', heavy)")
+    proc = subprocess.run([sys.executable, "-c", code, "--policy", "policies/navigate.onnx", "--episodes", "2",
+                           "--json", str(out), "--video", str(tmp_path / "v.mp4"), "--episode_length", "300"],
+                          capture_output=True, text=True, cwd=robot.REPO_ROOT)
+    assert proc.returncode == 0, proc.stderr
+    assert "heavy modules: []" in proc.stdout
+    doc = json.loads(out.read_text())
+    assert len(doc["episodes"]) == 2 and doc["model_matches_training"]
+    assert {"success", "final_distance", "fell", "goals_reached"} <= set(doc["episodes"][0])
+    assert (tmp_path / "v.mp4").stat().st_size > 10_000
+
+
+def test_play_bad_input_is_one_line(tmp_path):
+    wrong = tmp_path / "wrong.onnx"  # a 10-input graph whose metadata claims the goal task's 52
+    arrays = {"mean": np.zeros(10, np.float32), "std": np.ones(10, np.float32), "squash": False,
+              "layers": [(np.ones((10, 18), np.float32), np.zeros(18, np.float32))]}
+    meta = export.read_metadata(POLICIES / "goal.onnx")
+    wrong.write_bytes(export.onnx_model(arrays, meta).SerializeToString())
+    mislabelled = tmp_path / "mislabelled.onnx"  # the goal policy labelled as a navigation policy
+    arrays["mean"], arrays["std"] = np.zeros(52, np.float32), np.ones(52, np.float32)
+    arrays["layers"] = [(np.ones((52, 18), np.float32), np.zeros(18, np.float32))]
+    mislabelled.write_bytes(export.onnx_model(arrays, {**meta, "task": "navigate",
+                                                       "env_config": {**meta["env_config"], "task": "navigate"}})
+                            .SerializeToString())
+    (tmp_path / "junk.onnx").write_text("not a model")
+    cases = {
+        (str(wrong),): "graph maps 10 -> 18",
+        (str(mislabelled),): "observes 67 values",
+        (str(tmp_path / "junk.onnx"),): "not a readable ONNX model",
+        (str(tmp_path / "missing.onnx"),): "neither an ONNX file",
+        ("policies/goal.onnx", "--waypoints", "1,0"): "navigate-task option",
+        ("policies/navigate.onnx", "--waypoints", "1,x"): "waypoints are",
+        ("policies/goal.onnx", "--episodes", "0"): "--episodes must be at least 1",
+        ("policies/goal.onnx", "--goal_distance", "-1"): "goal_distance must be",
+    }
+    for args, message in cases.items():
+        proc = run_play("--policy", *args, "--no_video")
+        assert proc.returncode == 2 and message in proc.stderr and "Traceback" not in proc.stderr, (args, proc.stderr)
+    no_display = {k: v for k, v in __import__("os").environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    proc = run_play("--policy", "policies/goal.onnx", "--viewer", env=no_display)
+    assert proc.returncode == 2 and "needs a display" in proc.stderr
+
+
+def test_gymnasium_environments_pass_the_checker():
+    import gymnasium
+    from gymnasium.utils.env_checker import check_env
+
+    from hexa_mjx import gym_envs
+
+    for task, env_id in gym_envs.IDS.items():
+        env = gymnasium.make(env_id, render_mode="rgb_array", width=64, height=48)
+        check_env(env.unwrapped)
+        obs, _ = env.reset(seed=5)
+        again, _ = env.reset(seed=5)
+        np.testing.assert_array_equal(obs, again)  # a seed fixes the episode's start and goal
+        assert obs.shape == (52 if task == "goal" else 67,) and env.render().shape == (48, 64, 3)
+        _, reward, terminated, truncated, info = env.step(env.action_space.sample())
+        assert np.isfinite(reward) and not terminated and not truncated and "goal_approach" in info["terms"]
+        env.close()
+
+
+def test_mjx_vector_env_resets_finished_episodes_in_the_same_step():
+    from hexa_mjx import gym_envs
+
+    envs = gym_envs.MJXVectorEnv(num_envs=2, task="navigate", episode_length=3)
+    obs, _ = envs.reset(seed=0)
+    assert obs.shape == (2, 67) and obs.dtype == np.float32
+    for t in range(3):
+        prev = obs
+        obs, reward, terminated, truncated, info = envs.step(np.zeros((2, 18), np.float32))
+        assert reward.shape == (2,) and not terminated.any()
+    assert truncated.all() and info["_final_obs"].all()
+    # The returned observation is the next episode's first: a new goal, the robot back at its start.
+    assert not np.allclose(obs, info["final_obs"]) and not np.allclose(obs[:, :2], prev[:, :2])
+    with pytest.raises(ValueError, match="num_envs"):
+        gym_envs.MJXVectorEnv(num_envs=0)
