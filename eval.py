@@ -43,6 +43,12 @@ def main(argv=None) -> int:
     parser.add_argument("--goal_max_distance", type=float, default=None, help="navigate: m (default: the run's)")
     parser.add_argument("--episode_length", type=int, default=None,
                         help="control steps per episode (default: the run's)")
+    parser.add_argument("--disabled_legs", default=None,
+                        help='legs whose servos fail in every episode, e.g. "3" or "1 4" (numbers from 1)')
+    parser.add_argument("--leg_failure", default=None, choices=["none", "random"],
+                        help="'random': one random leg fails per episode (default: the run's)")
+    parser.add_argument("--failure_mode", default=None, choices=["limp", "locked"],
+                        help="a failed leg's servos give no torque (limp) or hold the start angles (locked)")
     parser.add_argument("--shadows", action="store_true",
                         help="render shadows and the skybox (5x slower without a GPU)")
     parser.add_argument("--no_compile_cache", dest="compile_cache", action="store_false",
@@ -55,12 +61,15 @@ def main(argv=None) -> int:
         parser.error("--videos must be 0 or more")
     try:
         waypoints = nav_metrics.parse_waypoints(args.waypoints) if args.waypoints is not None else None
+        disabled = parse_legs(args.disabled_legs) if args.disabled_legs is not None else None
         result = evaluation.evaluate(args.ckpt, episodes=args.episodes, videos=args.videos, out=args.out,
                                      seed=args.seed, video=args.video, task=args.task, shadows=args.shadows,
                                      start_joint_noise=args.start_joint_noise, start_yaw_noise=args.start_yaw_noise,
                                      max_contact_points=args.max_contact_points, waypoints=waypoints,
                                      goal_min_distance=args.goal_min_distance,
-                                     goal_max_distance=args.goal_max_distance, episode_length=args.episode_length)
+                                     goal_max_distance=args.goal_max_distance, episode_length=args.episode_length,
+                                     disabled_legs=disabled, failure_mode=args.failure_mode,
+                                     leg_failure="none" if disabled else args.leg_failure)
     except (FileNotFoundError, RuntimeError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
@@ -70,7 +79,16 @@ def main(argv=None) -> int:
         print(f"video: {path}")
     if "paths" in result:
         print(f"tracks from above: {result['paths']}")
+    print(f"foot-contact diagram: {result['gait_diagram']}")
     return 0
+
+
+def parse_legs(text: str) -> tuple[int, ...]:
+    """Leg numbers from "3" or "1 4" or "1,4"."""
+    try:
+        return tuple(int(x) for x in text.replace(",", " ").split())
+    except ValueError:
+        raise ValueError(f'--disabled_legs takes leg numbers from 1, like "3" or "1 4", got {text!r}') from None
 
 
 if __name__ == "__main__":

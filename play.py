@@ -15,6 +15,7 @@ import argparse
 import os
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 
@@ -113,17 +114,19 @@ def main(argv=None) -> int:
         return 0
 
     print(f"{policy.path}: {task} policy on native MuJoCo, {args.episodes} episode(s)")
-    episodes = []
+    episodes, start = [], time.perf_counter()
     for i in range(args.episodes):
         ep = player.run_episode(policy, env, args.seed + i, record=(i == 0 and not args.no_video))
         episodes.append(ep)
         print(f"episode {i:3d}: {'success' if ep['success'] else 'no success':10s} final distance "
               f"{ep['final_distance']:.2f} m  goals {ep['goals_reached']:2d}  {'fell' if ep['fell'] else 'upright'}  "
               f"feet only {ep['feet_only_share']:.0%} of {ep['steps']} steps")
+    elapsed = time.perf_counter() - start
     s = player.summarize(episodes)
     print(f"summary: success {s['success_rate']:.0%}, falls {s['fall_rate']:.0%}, final distance "
           f"{s['final_distance_mean']:.2f} m, goals/episode {s['goals_per_episode']:.1f}, feet only "
-          f"{s['feet_only_share']:.1%} of steps")
+          f"{s['feet_only_share']:.1%} of steps; {sum(e['steps'] for e in episodes) / elapsed:,.0f} control steps/s "
+          f"with the policy (one core)")
     if args.json:
         player.write_json(Path(args.json), policy, env, episodes)
         print(f"wrote {args.json}")

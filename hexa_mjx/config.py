@@ -37,6 +37,8 @@ class TrainConfig:
         "help": "reward ablations (any of these, space-separated)", "choices": sorted(rewards.ABLATIONS),
         "nargs": "*"})
     ctrl_hz: float = dataclasses.field(default=60.0, metadata={"help": "control rate, Hz (240 / whole number)"})
+    model: str = dataclasses.field(default="", metadata={
+        "help": "MJCF robot to train (default: models/hexapod.xml); convert one with python -m hexa_mjx.convert"})
     run_dir: str = dataclasses.field(default="", metadata={
         "help": "run directory (default runs/<reward>[-no_<ablation>]-s<seed>)"})
     num_evals: int = dataclasses.field(default=10, metadata={"help": "evaluations (and checkpoints) over the run"})
@@ -75,6 +77,14 @@ class TrainConfig:
         "help": "navigate: m, nearest goal distance drawn"})
     goal_max_distance: float = dataclasses.field(default=3.0, metadata={
         "help": "navigate: m, farthest goal distance drawn"})
+    leg_failure: str = dataclasses.field(default="none", metadata={
+        "help": "'random': each episode one random leg's servos fail (with --leg_failure_rate); the policy is "
+                "not told which", "choices": ["none", "random"]})
+    leg_failure_rate: float = dataclasses.field(default=0.5, metadata={
+        "help": "probability that an episode has a failed leg (--leg_failure random)"})
+    failure_mode: str = dataclasses.field(default="limp", metadata={
+        "help": "a failed leg's servos give no torque (limp) or hold the start angles (locked)",
+        "choices": ["limp", "locked"]})
     max_contact_points: int = dataclasses.field(default=0, metadata={
         "help": "MJX keeps only this many deepest robot-floor contacts per step (0: all 40 slots)"})
     num_eval_envs: int = dataclasses.field(default=32, metadata={
@@ -203,6 +213,9 @@ def validate(cfg: TrainConfig) -> TrainConfig:
                               f" there; resume with the same settings or choose another --run_dir")
     elif cfg.resume and run_dir.exists() and any(run_dir.iterdir()):
         raise ConfigError(f"{run_dir} has no config.json, so it is not a run this tool can resume")
+    if cfg.model and not Path(cfg.model).is_file():
+        raise ConfigError(f"--model {cfg.model} is not a file; convert a URDF with "
+                          f"`python -m hexa_mjx.convert URDF -o {cfg.model}`")
     make_env_for(cfg)  # a bad ctrl_hz, task or reward raises here, before compiling
     return cfg
 
@@ -220,6 +233,8 @@ def make_env_for(cfg: TrainConfig, task: str = "", **overrides):
     `task` runs the run's policy on another task's goals, which works only where the policy's
     observation can be computed there: a report-task policy on the navigation task's goals.
     """
+    if cfg.model:
+        overrides = {"model_path": cfg.model, **overrides}
     if task and task != cfg.task:
         if (cfg.task, task) != ("goal", "navigate"):
             raise ValueError(f"this is a {cfg.task} policy; it cannot be run on the {task} task (its observation "
@@ -230,5 +245,6 @@ def make_env_for(cfg: TrainConfig, task: str = "", **overrides):
     settings = dict(ablate=tuple(cfg.ablate), ctrl_hz=cfg.ctrl_hz, episode_length=cfg.episode_length,
                     start_joint_noise=cfg.start_joint_noise, start_yaw_noise=cfg.start_yaw_noise,
                     max_contact_points=cfg.max_contact_points, goal_min_distance=cfg.goal_min_distance,
-                    goal_max_distance=cfg.goal_max_distance, goal_distance_cap=cfg.goal_max_distance)
+                    goal_max_distance=cfg.goal_max_distance, goal_distance_cap=cfg.goal_max_distance,
+                    leg_failure=cfg.leg_failure, leg_failure_rate=cfg.leg_failure_rate, failure_mode=cfg.failure_mode)
     return make_env(cfg.reward, cfg.task, **{**settings, **overrides})

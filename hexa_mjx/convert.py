@@ -1,6 +1,7 @@
 """URDF to MJX-friendly MJCF.
 
     python -m hexa_mjx.convert path/to/robot.urdf -o models/hexapod.xml
+    python -m hexa_mjx.convert quad.urdf -o models/quad.xml --legs "lf:hip_lf,knee_lf,ankle_lf rf:hip_rf,knee_rf,ankle_rf ..."
 
 MuJoCo's own URDF importer reads the file (fusing fixed joints into their parent
 bodies); this module then writes a clean MJCF with the URDF's masses, inertias,
@@ -33,7 +34,7 @@ class ConversionError(ValueError):
 @dataclass(frozen=True)
 class Leg:
     name: str
-    joints: tuple[str, ...]  # in robot.JOINT_KINDS order, proximal first
+    joints: tuple[str, ...]  # proximal first (robot.JOINT_KINDS order when found by name)
 
 
 # ---------------------------------------------------------------------------
@@ -41,10 +42,14 @@ class Leg:
 
 
 def _resolve_mesh(filename: str, urdf_dir: Path) -> Path:
-    """Find a mesh named by a URDF: package:// and relative paths, or meshes/ beside it."""
+    """Find a mesh named by a URDF: an absolute path, or package:// and relative paths from the
+    URDF's folder, or meshes/ beside it. Never the current directory: a stray meshes/ folder
+    there must not change the robot."""
     stripped = re.sub(r"^package://[^/]+/", "", filename)
     stripped = re.sub(r"^file://", "", stripped)
-    candidates = [Path(stripped), urdf_dir / stripped, urdf_dir / "meshes" / Path(stripped).name]
+    candidates = [urdf_dir / stripped, urdf_dir / "meshes" / Path(stripped).name]
+    if Path(stripped).is_absolute():
+        candidates.insert(0, Path(stripped))
     for c in candidates:
         if c.is_file():
             return c.resolve()
@@ -52,6 +57,36 @@ def _resolve_mesh(filename: str, urdf_dir: Path) -> Path:
         f"mesh {filename!r} not found (looked in: {', '.join(str(c) for c in candidates)}); "
         "put the meshes beside the URDF or in a meshes/ folder next to it"
     )
+
+
+def parse_legs(text: str) -> list[Leg]:
+    """Legs from a mapping "NAME:JOINT,JOINT,... NAME:..." (joints proximal first)."""
+    legs, seen = [], set()
+    for item in text.split():
+        name, sep, joints = item.partition(":")
+        joint_list = tuple(j for j in joints.split(",") if j)
+        if not sep or not re.fullmatch(r"[A-Za-z0-9]+", name) or not joint_list:
+            raise ConversionError(f"--legs entry {item!r} is not NAME:JOINT,JOINT,... (a leg name of letters and "
+                                  "digits, then its joints from the body outward)")
+        if name in {leg.name for leg in legs}:
+            raise ConversionError(f"--legs names leg {name!r} twice")
+        repeated = sorted(seen & set(joint_list))
+        if repeated:
+            raise ConversionError(f"--legs gives joint(s) {repeated} to more than one leg")
+        seen |= set(joint_list)
+        legs.append(Leg(name, joint_list))
+    if not legs:
+        raise ConversionError("--legs is empty; give NAME:JOINT,JOINT,... for each leg")
+    return legs
+
+
+def check_legs(legs: list[Leg], joint_names: list[str]) -> list[Leg]:
+    """A --legs mapping checked against the URDF's revolute joints."""
+    missing = [j for leg in legs for j in leg.joints if j not in joint_names]
+    if missing:
+        raise ConversionError(f"--legs names joint(s) {missing} that are not revolute joints of the URDF; "
+                              f"its revolute joints are {sorted(joint_names)}")
+    return legs
 
 
 def find_legs(joint_names: list[str]) -> list[Leg]:
@@ -79,8 +114,9 @@ def find_legs(joint_names: list[str]) -> list[Leg]:
     return legs
 
 
-def _prepare_urdf(urdf_path: Path) -> tuple[str, str, list[Leg]]:
-    """Validate the URDF and rewrite it so MuJoCo's importer loads it with a free root."""
+def _prepare_urdf(urdf_path: Path, legs: list[Leg] | None = None) -> tuple[str, str, list[Leg]]:
+    """Validate the URDF and rewrite it so MuJoCo's importer loads it with a free root. Legs are
+    `legs` (a --legs mapping) or else found by the `<leg>_<kind>` naming."""
     if not urdf_path.is_file():
         raise ConversionError(f"URDF {urdf_path} does not exist")
     try:
@@ -109,7 +145,7 @@ def _prepare_urdf(urdf_path: Path) -> tuple[str, str, list[Leg]]:
     if len(roots) != 1:
         raise ConversionError(f"malformed URDF {urdf_path}: expected one root link, found {roots}")
     revolute = [j.get("name") for j in joints if j.get("type") in ("revolute", "continuous")]
-    legs = find_legs(revolute)
+    legs = check_legs(legs, revolute) if legs else find_legs(revolute)
 
     for mesh in root_el.iter("mesh"):
         mesh.set("filename", str(_resolve_mesh(mesh.get("filename", ""), urdf_path.parent)))
@@ -122,9 +158,9 @@ def _prepare_urdf(urdf_path: Path) -> tuple[str, str, list[Leg]]:
     return ET.tostring(root_el, encoding="unicode"), roots[0], legs
 
 
-def load_urdf(urdf_path: str | Path) -> tuple[mujoco.MjModel, str, list[Leg]]:
+def load_urdf(urdf_path: str | Path, legs: list[Leg] | None = None) -> tuple[mujoco.MjModel, str, list[Leg]]:
     """Compile a URDF with MuJoCo (fixed joints fused); returns model, root link and legs."""
-    text, root_link, legs = _prepare_urdf(Path(urdf_path))
+    text, root_link, legs = _prepare_urdf(Path(urdf_path), legs)
     try:
         model = mujoco.MjSpec.from_string(text).compile()
     except Exception as e:  # MuJoCo raises ValueError with its own message
@@ -203,9 +239,9 @@ def _collision_geom(body: mujoco.MjsBody, name: str, **kwargs) -> None:
                   rgba=[0.75, 0.75, 0.8, 1], **kwargs)
 
 
-def build_spec(urdf_path: str | Path) -> mujoco.MjSpec:
+def build_spec(urdf_path: str | Path, legs: list[Leg] | None = None) -> mujoco.MjSpec:
     """Build the MJCF spec for a URDF robot (see module docstring)."""
-    src, root_link, legs = load_urdf(urdf_path)
+    src, root_link, legs = load_urdf(urdf_path, legs)
     spec = mujoco.MjSpec()
     spec.modelname = Path(urdf_path).stem
     spec.compiler.degree = False
@@ -298,9 +334,9 @@ def _add_home_keyframe(spec: mujoco.MjSpec) -> None:
     spec.add_key(name="home", qpos=qpos, ctrl=np.zeros(model.nu), mpos=model.body_pos[model.body(robot.GOAL_BODY).id])
 
 
-def convert(urdf_path: str | Path) -> str:
-    """The MJCF text for a URDF robot."""
-    spec = build_spec(urdf_path)
+def convert(urdf_path: str | Path, legs: str = "") -> str:
+    """The MJCF text for a URDF robot; `legs` maps leg names to joints ("" finds `<leg>_<kind>`)."""
+    spec = build_spec(urdf_path, parse_legs(legs) if legs else None)
     xml = spec.to_xml()
     mujoco.MjModel.from_xml_string(xml)  # the output must load on its own
     return xml
@@ -310,16 +346,27 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m hexa_mjx.convert", description=__doc__.split("\n\n")[0])
     parser.add_argument("urdf", type=Path, help="URDF file; meshes beside it or in meshes/ next to it")
     parser.add_argument("-o", "--output", type=Path, default=robot.MODEL_XML, help="MJCF file to write")
+    parser.add_argument("--legs", default="", help='leg mapping for other joint names: "NAME:JOINT,JOINT,... '
+                        'NAME:..." (joints from the body outward; default: joints named <leg>_hip/knee/ankle)')
     args = parser.parse_args(argv)
+    if args.output.is_dir():
+        print(f"error: -o {args.output} is a folder; name the MJCF file to write (e.g. {args.output / 'robot.xml'})",
+              file=sys.stderr)
+        return 2
     try:
-        xml = convert(args.urdf)
+        xml = convert(args.urdf, args.legs)
     except ConversionError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    args.output.parent.mkdir(parents=True, exist_ok=True)
-    tmp = args.output.with_suffix(args.output.suffix + ".tmp")
-    tmp.write_text(xml)
-    tmp.replace(args.output)
+    tmp = args.output.with_name(args.output.name + ".tmp")
+    try:
+        args.output.parent.mkdir(parents=True, exist_ok=True)
+        tmp.write_text(xml)
+        tmp.replace(args.output)
+    except OSError as e:
+        tmp.unlink(missing_ok=True)
+        print(f"error: cannot write {args.output}: {e.strerror or e}", file=sys.stderr)
+        return 2
     print(f"wrote {args.output}")
     return 0
 

@@ -34,7 +34,7 @@ with contextlib.redirect_stdout(io.StringIO()):
 from hexa_mjx import rewards  # noqa: E402
 from hexa_mjx.env_config import EnvConfig, check_config  # noqa: E402
 from hexa_mjx.kinematics import fell as flipped, quat_mul  # noqa: E402
-from hexa_mjx.model import RobotModel, action_to_ctrl  # noqa: E402
+from hexa_mjx.model import RobotModel, action_to_ctrl, failed_ctrl  # noqa: E402
 
 __all__ = ["EnvConfig", "HexapodEnv", "floor_contacts"]
 
@@ -106,7 +106,8 @@ class HexapodEnv(Env):
         metrics = {f"reward/{name}": zero for name in self._active_terms()}
         metrics.update(distance=self.goal_distance(data), success=zero, fell=zero, nonfinite=zero, goal_bonus=zero,
                        goals_reached=zero, final_distance=zero, final_success=zero)
-        info = {"rng": rng, "t": jp.zeros((), jp.int32), "success": zero, "goals": jp.zeros((), jp.int32)}
+        info = {"rng": rng, "t": jp.zeros((), jp.int32), "success": zero, "goals": jp.zeros((), jp.int32),
+                "failed_legs": self.draw_failure(jax.random.fold_in(rng, 3))}
         return State(data, self.observe(data), zero, zero, metrics, info)
 
     def step(self, state: State, action: jax.Array) -> State:
@@ -115,8 +116,20 @@ class HexapodEnv(Env):
             raise ValueError(f"action must have shape ({self.action_size},) per environment, got {action.shape}; "
                              "batch environments with jax.vmap")
         prev = state.pipeline_state
-        data = prev.replace(ctrl=action_to_ctrl(action, self.robot.ctrl_lo, self.robot.ctrl_hi))
-        data, _ = jax.lax.scan(lambda d, _: (mjx.step(self.mjx_model, d), None), data, None, length=self.n_substeps)
+        target = action_to_ctrl(action, self.robot.ctrl_lo, self.robot.ctrl_hi)
+        data = prev.replace(ctrl=target)
+        if self.leg_failures:  # failed servos, re-targeted at every physics step
+            failed = state.info["failed_legs"][self.robot.actuator_leg] > 0
+
+            def physics_step(d, _):
+                ctrl = failed_ctrl(target, d.qpos[self.robot.actuator_qpos], failed, self.config.failure_mode,
+                                   self.robot.hold_ctrl)
+                return mjx.step(self.mjx_model, d.replace(ctrl=ctrl)), None
+        else:
+            def physics_step(d, _):
+                return mjx.step(self.mjx_model, d), None
+        data, _ = jax.lax.scan(physics_step, data, None, length=self.n_substeps)
+        data = data.replace(ctrl=target)  # the policy's own command, whatever failed
 
         # A diverged physics state never reaches the learner: keep the last finite one and end the episode.
         finite = jp.isfinite(data.qpos).all() & jp.isfinite(data.qvel).all()
@@ -142,7 +155,8 @@ class HexapodEnv(Env):
         data = self.set_goal(data, jp.where(completed, self.next_goal(data, goals, key), self.goal(data)))
         success = jp.maximum(state.info["success"], reached.astype(jp.float32))
         info = {**state.info, "rng": rng, "t": jp.where(over, 0, t), "success": jp.where(over, 0.0, success),
-                "goals": jp.where(over, 0, goals)}
+                "goals": jp.where(over, 0, goals),
+                "failed_legs": jp.where(over, self.draw_failure(jax.random.fold_in(key, 3)), state.info["failed_legs"])}
         # Start from the incoming metrics: wrappers (brax's evaluator) add keys of their own.
         metrics = {**state.metrics, **{f"reward/{name}": value for name, value in scaled.items()}}
         # Per-step values whose sums over an episode are the per-episode figures brax's evaluator reports.
@@ -153,6 +167,22 @@ class HexapodEnv(Env):
                        final_distance=jp.where(over, dist, 0.0), final_success=jp.where(over, success, 0.0))
         return state.replace(pipeline_state=data, obs=self.observe(data), reward=reward,
                              done=done.astype(jp.float32), metrics=metrics, info=info)
+
+    @property
+    def leg_failures(self) -> bool:
+        """Whether any leg can fail (fixed disabled legs or random failures)."""
+        return bool(self.config.disabled_legs) or self.config.leg_failure == "random"
+
+    def draw_failure(self, rng: jax.Array) -> jax.Array:
+        """An episode's failed legs, (legs,) of 0/1: the fixed `disabled_legs`, or one leg drawn
+        uniformly with probability `leg_failure_rate`. Drawn at reset and on an episode's last step
+        (so brax's auto-reset, which keeps `info`, starts the next episode with a new draw)."""
+        legs = len(self.robot.legs)
+        if self.config.leg_failure != "random":
+            return jp.zeros(legs).at[jp.asarray(self.config.disabled_legs, jp.int32) - 1].set(1.0)
+        k_which, k_whether = jax.random.split(rng)
+        fails = jax.random.uniform(k_whether) < self.config.leg_failure_rate
+        return jax.nn.one_hot(jax.random.randint(k_which, (), 0, legs), legs) * fails
 
     def restart(self, data: mjx.Data, rng: jax.Array) -> mjx.Data:
         """`data` with a fresh start state (qpos, qvel, ctrl, time) and first goal drawn with `rng`.

@@ -51,6 +51,14 @@ class EnvConfig:
     # Navigation: a fixed path instead of random goals, ((x, y), ...) in metres, world frame,
     # relative to the start position. The last waypoint stays the goal once reached.
     waypoints: tuple = ()
+    # Leg failure: a failed leg's three servos stop working. "limp": no torque; "locked": held at the
+    # start pose's angles. `disabled_legs` fails these legs (1-based) in every episode; with
+    # `leg_failure="random"`, each episode fails one leg drawn uniformly, with probability
+    # `leg_failure_rate`. The policy is not told which leg failed.
+    disabled_legs: tuple = ()
+    leg_failure: str = "none"  # "none" | "random"
+    leg_failure_rate: float = 0.5  # probability that an episode has a failed leg (random)
+    failure_mode: str = "limp"  # "limp" | "locked"
 
 
 def check_config(config: EnvConfig) -> None:
@@ -72,6 +80,19 @@ def check_config(config: EnvConfig) -> None:
     if config.max_contact_points < 0:
         raise ValueError(f"max_contact_points must be 0 (every contact slot) or positive, "
                          f"got {config.max_contact_points}")
+    if config.leg_failure not in ("none", "random"):
+        raise ValueError(f"leg_failure is 'none' or 'random', got {config.leg_failure!r}")
+    if config.failure_mode not in ("limp", "locked"):
+        raise ValueError(f"failure_mode is 'limp' or 'locked', got {config.failure_mode!r}")
+    if not 0 <= config.leg_failure_rate <= 1:
+        raise ValueError(f"leg_failure_rate is a probability in [0, 1], got {config.leg_failure_rate}")
+    if config.disabled_legs and config.leg_failure != "none":
+        raise ValueError("disabled_legs and leg_failure='random' exclude each other: choose fixed or random failures")
+    for leg in config.disabled_legs:
+        if not isinstance(leg, int) or isinstance(leg, bool) or leg < 1:
+            raise ValueError(f"disabled_legs are leg numbers from 1, got {list(config.disabled_legs)}")
+    if len(set(config.disabled_legs)) != len(config.disabled_legs):
+        raise ValueError(f"disabled_legs names a leg twice: {list(config.disabled_legs)}")
     for point in config.waypoints:
         if len(point) != 2 or not all(math.isfinite(float(c)) for c in point):
             raise ValueError(f"a waypoint is a pair of finite coordinates x,y in metres, got {point}")

@@ -12,7 +12,7 @@ import jax
 import jax.numpy as jp
 import numpy as np
 
-from hexa_mjx import checkpoints, config, nav_metrics, plots, robot, training
+from hexa_mjx import checkpoints, config, gait, nav_metrics, plots, robot, training
 from hexa_mjx.video import VIDEO_FPS, render_video
 
 
@@ -36,10 +36,22 @@ def group_contacts(env, data, groups) -> jax.Array:
     return jp.stack([(on_floor & (group == g)).sum() for g in range(len(CONTACT_GROUPS))])
 
 
+def foot_stance(env, data) -> jax.Array:
+    """Whether each foot touches the floor, (legs,) bool."""
+    on_floor, geom = env.floor_contact_geoms(data)
+    return (on_floor[None] & (geom[None] == jp.asarray(env.feet)[:, None])).any(1)
+
+
+def actuator_power(env, data) -> jax.Array:
+    """Mechanical power of the servos, sum over joints of |torque x joint velocity|, W."""
+    return jp.abs(data.actuator_force * data.qvel[env.robot.actuator_dof]).sum()
+
+
 def rollout(env, policy, num_episodes: int, seed: int = 0):
     """Run `num_episodes` episodes in parallel to their end; returns per-step arrays (time first)
     of qpos, the goal each step is scored against, reward, done, distance, floor contacts per
-    CONTACT_GROUPS entry and the env's metrics, with `alive` marking steps in an episode.
+    CONTACT_GROUPS entry, foot stance, actuator power and the env's metrics, with `alive` marking
+    steps in an episode.
 
     The episodes are split over as many of JAX's devices as divide them (one per core on the CPU
     after `prepare_jax`), in order, so episode i is the same whatever the split.
@@ -60,6 +72,8 @@ def rollout(env, policy, num_episodes: int, seed: int = 0):
             out = {"qpos": nxt.pipeline_state.qpos, "goal": jax.vmap(env.goal)(state.pipeline_state),
                    "reward": nxt.reward, "done": nxt.done, "alive": alive,
                    "contacts": jax.vmap(lambda d: group_contacts(env, d, groups))(nxt.pipeline_state),
+                   "stance": jax.vmap(lambda d: foot_stance(env, d))(nxt.pipeline_state),
+                   "power": jax.vmap(lambda d: actuator_power(env, d))(nxt.pipeline_state),
                    **{k: v for k, v in nxt.metrics.items()
                       if k.startswith("reward/") or k in ("distance", "fell", "goal_bonus", "nonfinite", "goals_reached")}}
             return (nxt, alive * (1.0 - nxt.done)), out
@@ -148,6 +162,15 @@ def episode_table(env, start_qpos, traj) -> dict:
     if "contacts" in traj:
         non_foot = traj["contacts"][..., :CONTACT_GROUPS.index("feet")].sum(-1)
         summary["feet_only_steps"] = float(((non_foot == 0) * alive).sum() / max(alive.sum(), 1))
+    if "stance" in traj:
+        # The walk to the first goal (report's task); navigation walks the whole episode.
+        window = alive if env.config.task == "navigate" else walking
+        records = gait.of_episodes(traj["stance"], traj["power"], traj["qpos"][..., :2], window, env.dt,
+                                   env.robot.mass, env.robot.leg_length)
+        summary["gait"] = gait.summarize(records)
+        per_episode["gait_class"] = np.array([r["class"] for r in records])
+        per_episode["cost_of_transport"] = np.array([r.get("cost_of_transport") if np.isfinite(
+            r.get("cost_of_transport", np.nan)) else None for r in records], dtype=object)
     per_episode = {k: v.tolist() for k, v in per_episode.items()}
     if getattr(env, "name", "") == "navigate":
         args = (start_qpos, traj["qpos"], traj["goals_reached"], alive, np.asarray(per_episode["fell"]))
@@ -196,6 +219,8 @@ def format_table(summary: dict) -> str:
         rows.append(("floor contact points at once, most", f"{summary['contact_points_max']} ({kept})"))
     if "feet_only_steps" in summary:
         rows.append(("steps with only feet on the floor", f"{summary['feet_only_steps']:.2%}"))
+    if "gait" in summary:
+        rows += gait.table_rows(summary["gait"])
     rows += navigation_rows(summary)
     rows += [(f"  reward/{k}, per episode", f"{v:.1f}") for k, v in summary["reward_terms"].items()]
     width = max(len(k) for k, _ in rows)
@@ -260,6 +285,7 @@ def evaluate(ckpt: str | Path, episodes: int = 128, videos: int = 1, out: str | 
     result = {"checkpoint": str(ckpt_dir), "step": step, "config": run, **table, "videos": []}
     if env.name == "navigate":
         result["paths"] = str(plot_tracks(env, start, traj, out / "paths.png"))
+    result["gait_diagram"] = str(plot_gait(env, traj, table, out / "gait.png"))
     if video:
         for i in range(min(videos, episodes)):
             n = int(traj["alive"][:, i].sum())
@@ -272,6 +298,16 @@ def evaluate(ckpt: str | Path, episodes: int = 128, videos: int = 1, out: str | 
     tmp.write_text(json.dumps(result, indent=1))
     tmp.replace(out / "metrics.json")
     return result
+
+
+def plot_gait(env, traj, table, out: Path, seconds: float = 4.0) -> Path:
+    """Episode 0's foot-contact diagram: its first `seconds` after the settling steps."""
+    steps = int(traj["alive"][:, 0].sum())
+    first = min(gait.SETTLE_STEPS, steps)
+    last = min(steps, first + int(round(seconds / env.dt)))
+    cls = table["per_episode"]["gait_class"][0]
+    return plots.plot_contact_diagram(traj["stance"][first:last, 0], env.dt, out, env.robot.legs,
+                                      title=f"episode 0 from {first * env.dt:.1f} s: {cls}")
 
 
 def plot_tracks(env, start, traj, out: Path, count: int = 8) -> Path:

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from hexa_mjx import robot
-from hexa_mjx.observations import LAYOUTS
+from hexa_mjx.observations import layout
 
 METADATA_KEY = "hexa_mjx"
 FORMAT = 1  # bumped when the metadata's meaning changes
@@ -93,7 +93,7 @@ def deployment_metadata(env, cfg, step: int, source: str) -> dict:
         "format": FORMAT,
         "task": env.config.task,
         "observation_size": env.observation_size,
-        "observation_layout": [dict(start=a, end=b, what=w, units=u) for a, b, w, u in LAYOUTS[env.config.task]],
+        "observation_layout": [dict(start=a, end=b, what=w, units=u) for a, b, w, u in layout(env.config.task, model.nu)],
         "action_size": env.action_size,
         "joint_order": [model.joint(model.actuator_trnid[i, 0]).name for i in range(model.nu)],
         "action_mapping": {

@@ -51,21 +51,35 @@ class RobotModel:
         self.n_substeps = substeps(model, config.ctrl_hz)
 
         self.floor = model.geom(robot.FLOOR_GEOM).id
-        self.torso = model.body(robot.TORSO_BODY).id
         self.goal_mocap = int(model.body_mocapid[model.body(robot.GOAL_BODY).id])
-        legs = sorted({model.joint(j).name.split("_")[0] for j in range(model.njnt)
-                       if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE}, key=lambda s: int(s[3:]))
-        self.feet = np.array([model.geom(robot.foot_geom(leg)).id for leg in legs])  # foot geom ids
-        # Leg index of every geom (-1 for the torso and the world), and whether it is a foot.
+        # A leg is whatever hangs from the torso above a foot sphere `<leg>_foot` (the converter
+        # names them so), so any joint names work; legs in the model's order of feet.
+        self.feet = np.array([g for g in range(model.ngeom) if (model.geom(g).name or "").endswith(robot.FOOT_SUFFIX)])
+        if len(self.feet) == 0:
+            raise ValueError(f"{config.model_path} has no foot geoms (spheres named <leg>{robot.FOOT_SUFFIX}); "
+                             "convert the robot with `python -m hexa_mjx.convert`")
+        self.legs = [model.geom(g).name[: -len(robot.FOOT_SUFFIX)] for g in self.feet]
+        # Leg index of every body from a foot up to the torso (the free joint's body); other
+        # bodies below a leg body join that leg; the torso and the world are -1.
+        self.torso = torso = int(model.jnt_bodyid[np.flatnonzero(model.jnt_type == mujoco.mjtJoint.mjJNT_FREE)[0]])
         body_leg = np.full(model.nbody, -1)
-        for i, leg in enumerate(legs):
-            for j in range(model.njnt):
-                if model.joint(j).name.startswith(leg + "_"):
-                    body_leg[model.jnt_bodyid[j]] = i
-        for b in range(1, model.nbody):  # bodies without joints inherit their parent's leg
-            if body_leg[b] < 0 and model.body_parentid[b] > 0:
+        for i, foot in enumerate(self.feet):
+            b = model.geom_bodyid[foot]
+            while b not in (torso, 0):
+                body_leg[b] = i
+                b = model.body_parentid[b]
+        for b in range(1, model.nbody):  # parents precede children in MuJoCo's body order
+            if body_leg[b] < 0 and b != torso and body_leg[model.body_parentid[b]] >= 0:
                 body_leg[b] = body_leg[model.body_parentid[b]]
         self.geom_leg = body_leg[model.geom_bodyid]
+        joints = model.actuator_trnid[:, 0]
+        self.actuator_leg = body_leg[model.jnt_bodyid[joints]]  # leg index of each actuator
+        self.actuator_qpos = model.jnt_qposadr[joints]  # each actuator's joint angle in qpos
+        for leg in config.disabled_legs:
+            if leg > len(self.legs):
+                raise ValueError(f"disabled_legs: leg {leg} does not exist; this robot has legs 1 to {len(self.legs)}")
+        if len(config.disabled_legs) == len(self.legs):
+            raise ValueError(f"disabled_legs disables all {len(self.legs)} legs; leave at least one working")
         self.geom_is_foot = np.isin(np.arange(model.ngeom), self.feet)
         self.foot_radius = model.geom_size[self.feet, 0]  # m
         self.ctrl_lo, self.ctrl_hi = (np.asarray(x, np.float32) for x in model.actuator_ctrlrange.T)
@@ -79,7 +93,13 @@ class RobotModel:
         for _ in range(config.settle_steps):
             mujoco.mj_step(model, data)
         self.qpos0, self.qvel0, self.ctrl0 = (np.array(x) for x in (data.qpos, data.qvel, data.ctrl))
+        self.mass = float(model.body_subtreemass[torso])  # kg, the whole robot
+        # m, hip axis to foot centre in the standing pose, mean over legs (for the Froude number)
+        hips = [joints[np.flatnonzero(self.actuator_leg == i)[0]] for i in range(len(self.legs))]
+        self.leg_length = float(np.mean(np.linalg.norm(data.xanchor[hips] - data.geom_xpos[self.feet], axis=1)))
+        self.actuator_dof = model.jnt_dofadr[joints]  # each actuator's joint velocity in qvel
         self.start_xy = self.qpos0[:2].copy()
+        self.hold_ctrl = self.qpos0[self.actuator_qpos].astype(np.float32)  # a locked leg's targets, rad
 
     def contact_counts(self, geom1, geom2, dist, foot_z, lift_clearance: float):
         """(leg contacts while that leg's foot is lifted more than `lift_clearance` m, contacts of
@@ -91,6 +111,13 @@ class RobotModel:
         lifted = (foot_z - xp.asarray(self.foot_radius))[xp.maximum(leg, 0)] > lift_clearance
         bad = on_floor & (leg >= 0) & lifted
         return bad.sum(), (on_floor & ~xp.asarray(self.geom_is_foot)[other]).sum()
+
+
+def failed_ctrl(target, joint_angles, failed_actuators, mode: str, hold):
+    """Servo targets with failed actuators disabled: a limp servo's target follows its joint's
+    angle (no spring torque), a locked one's is `hold`. NumPy or JAX arrays."""
+    xp = namespace(target)
+    return xp.where(failed_actuators, joint_angles if mode == "limp" else hold, target)
 
 
 def substeps(model: mujoco.MjModel, ctrl_hz: float) -> int:

@@ -21,10 +21,8 @@ import numpy as np
 from hexa_mjx import rewards
 from hexa_mjx.env_config import EnvConfig, check_config
 from hexa_mjx.kinematics import fell, quat_mul
-from hexa_mjx.model import RobotModel, action_to_ctrl
-from hexa_mjx.observations import LAYOUTS, goal_observation, navigate_observation
-
-TASKS = tuple(LAYOUTS)
+from hexa_mjx.model import RobotModel, action_to_ctrl, failed_ctrl
+from hexa_mjx.observations import TASKS, goal_observation, layout, navigate_observation
 
 
 class NativeEnv:
@@ -50,6 +48,7 @@ class NativeEnv:
         self.rng = np.random.default_rng()
         self.t = self.goals = 0
         self.success = False
+        self.failed_legs = np.zeros(len(self.robot.legs))
 
     @property
     def dt(self) -> float:
@@ -58,7 +57,7 @@ class NativeEnv:
 
     @property
     def observation_size(self) -> int:
-        return LAYOUTS[self.observe_as][-1][1]
+        return layout(self.observe_as, self.mj_model.nu)[-1][1]
 
     @property
     def action_size(self) -> int:
@@ -96,6 +95,7 @@ class NativeEnv:
         data.qpos[:], data.qvel[:], data.ctrl[:] = qpos, robot.qvel0, robot.ctrl0
         self.t = self.goals = 0
         self.success = False
+        self.failed_legs = self._draw_failure()
         self.set_goal(self._first_goal())
         mujoco.mj_forward(self.mj_model, data)
         return self.observe()
@@ -118,9 +118,15 @@ class NativeEnv:
             raise ValueError(f"action must have shape ({self.action_size},), got {action.shape}")
         model, data = self.mj_model, self.data
         prev_qpos, prev_qvel = data.qpos.copy(), data.qvel.copy()
-        data.ctrl[:] = action_to_ctrl(np.nan_to_num(action), self.robot.ctrl_lo, self.robot.ctrl_hi)
+        target = action_to_ctrl(np.nan_to_num(action), self.robot.ctrl_lo, self.robot.ctrl_hi)
+        failed = self.failed_legs[self.robot.actuator_leg] > 0
+        data.ctrl[:] = target
         for _ in range(self.n_substeps):
+            if failed.any():  # failed servos, re-targeted at every physics step
+                data.ctrl[:] = failed_ctrl(target, data.qpos[self.robot.actuator_qpos], failed,
+                                           self.config.failure_mode, self.robot.hold_ctrl)
             mujoco.mj_step(model, data)
+        data.ctrl[:] = target  # the policy's own command, whatever failed
         finite = bool(np.isfinite(data.qpos).all() and np.isfinite(data.qvel).all())
         if not finite:  # as in MJX: keep the last finite state and end the episode
             data.qpos[:], data.qvel[:] = prev_qpos, prev_qvel
@@ -155,6 +161,16 @@ class NativeEnv:
         c, feet = self.data.contact, self.robot.feet
         return self.robot.contact_counts(c.geom1, c.geom2, c.dist, self.data.geom_xpos[feet, 2],
                                          self.config.lift_clearance)
+
+    def _draw_failure(self) -> np.ndarray:
+        """This episode's failed legs (0/1 per leg), as HexapodEnv.draw_failure draws them."""
+        mask = np.zeros(len(self.robot.legs))
+        if self.config.leg_failure == "random":
+            leg = self.rng.integers(len(mask))
+            mask[leg] = float(self.rng.uniform() < self.config.leg_failure_rate)
+        else:
+            mask[np.asarray(self.config.disabled_legs, int) - 1] = 1.0
+        return mask
 
     # -- goals, as the task modules in hexa_mjx.tasks draw them ------------------
 

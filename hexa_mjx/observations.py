@@ -1,7 +1,7 @@
 """What each task's policy observes: pure functions of the physics state's arrays (NumPy or JAX).
 
 The MJX environment and the native-MuJoCo player and Gymnasium environments call the same
-functions, so a policy sees the same numbers in either engine. `LAYOUTS` names every slice with
+functions, so a policy sees the same numbers in either engine. `layout` names every slice with
 its units; the ONNX export stores it for deployers.
 """
 
@@ -12,10 +12,11 @@ import numpy as np
 from hexa_mjx.kinematics import namespace, rotate, to_heading_frame, yaw
 
 GRAVITY_WORLD = np.array([0.0, 0.0, -1.0], np.float32)  # unit vector
+TASKS = ("goal", "navigate")  # the tasks with an observation here
 
 
 def goal_observation(qpos, qvel, goal_xy):
-    """The report's 52 values, world frame (LAYOUTS["goal"])."""
+    """The report's 52 values, world frame (layout("goal", ...))."""
     xp = namespace(qpos)
     goal_vec = goal_xy - qpos[:2]
     angvel_world = rotate(qvel[3:6], qpos[3:7])  # free-joint angular velocity is body-frame
@@ -25,7 +26,7 @@ def goal_observation(qpos, qvel, goal_xy):
 
 def navigate_observation(qpos, qvel, ctrl, goal_xy, ctrl_lo, ctrl_hi, distance_cap):
     """67 values in the heading frame (x forward, y left, z up, turned by the torso's yaw only)
-    (LAYOUTS["navigate"]). The distance reads at most `distance_cap` m: a farther goal looks like
+    (layout("navigate", ...)). The distance reads at most `distance_cap` m: a farther goal looks like
     the farthest goal trained on, and the policy walks toward it until it is in range."""
     xp = namespace(qpos)
     quat = qpos[3:7]
@@ -54,18 +55,19 @@ def _layout(parts):
     return out
 
 
-_JOINTS = [("joint angles, hinge order of the model", "rad", 18), ("joint velocities", "rad/s", 18)]
-
-# Every slice of each task's observation, with units.
-LAYOUTS: dict[str, list[tuple[int, int, str, str]]] = {
-    "goal": _layout([
-        ("torso position, world", "m", 3), ("torso quaternion (w, x, y, z), world", "", 4),
-        ("torso linear velocity, world", "m/s", 3), ("torso angular velocity, world", "rad/s", 3),
-        *_JOINTS, ("goal minus torso (x, y), world", "m", 2), ("goal distance", "m", 1)]),
-    "navigate": _layout([
-        ("goal direction (x, y), heading frame, unit vector", "", 2),
-        ("goal distance, capped at the trained range's end", "m", 1), ("torso height", "m", 1),
-        ("torso linear velocity (x, y) heading frame, z world", "m/s", 3),
-        ("torso angular velocity, body frame", "rad/s", 3), ("gravity direction, body frame", "", 3),
-        *_JOINTS, ("previous action (control targets mapped back to [-1, 1])", "", 18)]),
-}
+def layout(task: str, joints: int) -> list[tuple[int, int, str, str]]:
+    """(start, end, what, units) of every slice of `task`'s observation on a robot with `joints` joints."""
+    joint_parts = [("joint angles, hinge order of the model", "rad", joints), ("joint velocities", "rad/s", joints)]
+    if task == "goal":
+        return _layout([
+            ("torso position, world", "m", 3), ("torso quaternion (w, x, y, z), world", "", 4),
+            ("torso linear velocity, world", "m/s", 3), ("torso angular velocity, world", "rad/s", 3),
+            *joint_parts, ("goal minus torso (x, y), world", "m", 2), ("goal distance", "m", 1)])
+    if task == "navigate":
+        return _layout([
+            ("goal direction (x, y), heading frame, unit vector", "", 2),
+            ("goal distance, capped at the trained range's end", "m", 1), ("torso height", "m", 1),
+            ("torso linear velocity (x, y) heading frame, z world", "m/s", 3),
+            ("torso angular velocity, body frame", "rad/s", 3), ("gravity direction, body frame", "", 3),
+            *joint_parts, ("previous action (control targets mapped back to [-1, 1])", "", joints)])
+    raise ValueError(f"unknown task {task!r}; choose one of {list(TASKS)}")

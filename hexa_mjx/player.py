@@ -16,7 +16,7 @@ import numpy as np
 from hexa_mjx.env_config import EnvConfig
 from hexa_mjx.export import FORMAT, METADATA_KEY
 from hexa_mjx.native import NativeEnv
-from hexa_mjx.observations import LAYOUTS
+from hexa_mjx.observations import TASKS, layout
 
 
 class OnnxPolicy:
@@ -60,10 +60,11 @@ def env_for(policy: OnnxPolicy, model_path: str | Path | None = None, **override
     waypoints, episode length...); checks that the model's joints and observation match the policy."""
     meta = policy.metadata
     task = meta["env_config"].get("task")
-    if task not in LAYOUTS:
-        raise ValueError(f"{policy.path} is a policy for task {task!r}; this version knows {list(LAYOUTS)}")
-    if LAYOUTS[task][-1][1] != meta["observation_size"]:
-        raise ValueError(f"the {task} task observes {LAYOUTS[task][-1][1]} values, the policy {policy.path} "
+    if task not in TASKS:
+        raise ValueError(f"{policy.path} is a policy for task {task!r}; this version knows {list(TASKS)}")
+    size = layout(task, meta["action_size"])[-1][1]
+    if size != meta["observation_size"]:
+        raise ValueError(f"the {task} task observes {size} values, the policy {policy.path} "
                          f"expects {meta['observation_size']}: it was exported for another task or version")
     settings = {**meta["env_config"], **{k: v for k, v in overrides.items() if v is not None}}
     settings["ablate"] = tuple(settings.get("ablate", ()))
@@ -76,7 +77,8 @@ def env_for(policy: OnnxPolicy, model_path: str | Path | None = None, **override
     joints = [model.joint(model.actuator_trnid[i, 0]).name for i in range(model.nu)]
     if joints != meta["joint_order"]:
         raise ValueError(f"the model {env.config.model_path} drives joints {joints}, but the policy "
-                         f"{policy.path} was trained on {meta['joint_order']}; use the model it was trained on")
+                         f"{policy.path} was trained on {meta['joint_order']}; pass the model it was trained on "
+                         f"(--model .../{meta['model']['file']})")
     return env
 
 
@@ -167,6 +169,10 @@ def view(policy: OnnxPolicy, env: NativeEnv, seed: int = 0) -> None:
 
     pending = []
     with mujoco.viewer.launch_passive(env.mj_model, env.data, key_callback=pending.append) as viewer:
+        with viewer.lock():  # follow the torso from behind and above
+            viewer.cam.type = mujoco.mjtCamera.mjCAMERA_TRACKING
+            viewer.cam.trackbodyid = env.robot.torso
+            viewer.cam.distance, viewer.cam.elevation, viewer.cam.azimuth = 2.0, -30.0, 135.0
         obs, episode = env.reset(seed=seed), 0
         while viewer.is_running():
             tick = time.perf_counter()

@@ -90,6 +90,29 @@ def plot_paths(tracks: list, out: Path, corners=None, goals: list | None = None,
     return _save(fig, out)
 
 
+def plot_contact_diagram(stance, dt: float, out: Path, legs: list[str], title: str = "") -> Path:
+    """Foot-contact diagram: one row per leg against time (s), a bar where the foot is down."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    stance = np.asarray(stance, bool)
+    fig, ax = plt.subplots(figsize=(8, 0.35 * len(legs) + 1.2), constrained_layout=True)
+    for row in range(stance.shape[1]):
+        s = np.concatenate([[False], stance[:, row], [False]])
+        starts, ends = np.flatnonzero(~s[:-1] & s[1:]), np.flatnonzero(s[:-1] & ~s[1:])
+        ax.broken_barh([(a * dt, (b - a) * dt) for a, b in zip(starts, ends)], (row - 0.4, 0.8), color="0.2")
+    ax.set_yticks(range(len(legs)), legs)
+    ax.invert_yaxis()
+    ax.set_xlim(0, len(stance) * dt)
+    ax.set_xlabel("time (s); bars: foot on the floor")
+    if title:
+        ax.set_title(title, fontsize=10)
+    return _save(fig, out)
+
+
 def contact_sheet(video: Path, out: Path, count: int = 6, every: int = 40) -> Path:
     """A row of `count` frames, `every` frames apart, from an MP4 (half size)."""
     import imageio.v2 as imageio

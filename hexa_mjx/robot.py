@@ -13,22 +13,25 @@ MODEL_XML = REPO_ROOT / "models" / "hexapod.xml"
 # Reference data, read at conversion time only; never copied into the project.
 SEED_URDF = REPO_ROOT.parent / "shared" / "robots" / "seed_hexapod" / "hexapod.urdf"
 
-# Kinematic names. A leg is any set of revolute joints `<leg>_<kind>` with every kind
-# present; the converter finds legs by this pattern, so a 4- or 8-legged robot works too.
+# Kinematic names. By default the converter finds a leg as revolute joints `<leg>_<kind>` with
+# every kind present; `--legs` maps any other names (a 4- or 8-legged robot works too).
 LEG_JOINT_PATTERN = r"^(leg\d+)_(hip|knee|ankle)$"
 JOINT_KINDS = ("hip", "knee", "ankle")
 LEGS = tuple(f"leg{i}" for i in range(1, 7))
 JOINT_NAMES = tuple(f"{leg}_{kind}" for leg in LEGS for kind in JOINT_KINDS)
-TORSO_BODY = "base_link"  # the URDF's root link
+TORSO_BODY = "base_link"  # the report URDF's root link (the environment uses the free joint's body)
 TORSO_GEOM = "torso"
 FLOOR_GEOM = "floor"
 GOAL_BODY = "goal"
 TRACKING_CAMERA = "track"
 
 
+FOOT_SUFFIX = "_foot"  # the environment finds legs by their foot spheres, `<leg>_foot`
+
+
 def foot_geom(leg: str) -> str:
     """Name of the sphere at the tip of `leg`."""
-    return f"{leg}_foot"
+    return leg + FOOT_SUFFIX
 
 
 # Actuation: the report's PyBullet position control capped each joint at 5 N*m.

@@ -58,6 +58,7 @@ def test_time_to_success_configurations():
     (["--num_minibatches", "0"], "--num_minibatches must be"),
     (["--hidden", "0"], "--hidden sizes must each be at least 1"),
     (["--max_grad_norm", "inf"], "--max_grad_norm must be"),
+    (["--model", "no/such/robot.xml"], "--model no/such/robot.xml is not a file"),
 ])
 def test_numeric_flags_out_of_range_are_rejected(flags, message, tmp_path):
     cfg = config.parse_args([*flags, "--run_dir", str(tmp_path / "run")])
@@ -65,3 +66,13 @@ def test_numeric_flags_out_of_range_are_rejected(flags, message, tmp_path):
                        .replace("]", r"\]")):
         config.validate(cfg)
     assert not (tmp_path / "run").exists()
+
+
+def test_model_flag_reaches_the_environment(tmp_path):
+    from hexa_mjx import robot
+
+    copy = tmp_path / "robot.xml"  # the model references no mesh files, so a copy loads anywhere
+    copy.write_text(robot.MODEL_XML.read_text())
+    cfg = config.validate(config.parse_args(["--model", str(copy), "--run_dir", str(tmp_path / "run")]))
+    assert config.make_env_for(cfg).config.model_path == str(copy)
+    assert config.make_env_for(cfg, task="navigate").config.model_path == str(copy)

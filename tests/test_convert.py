@@ -40,8 +40,9 @@ BOXES = {
 }
 
 
-def make_toy(tmp_path: Path, legs=2, drop_joint=None, missing_mesh=None) -> Path:
-    """A URDF with `legs` legs along +-y (hip/knee/ankle each), a fixed servo link, and box meshes."""
+def make_toy(tmp_path: Path, legs=2, drop_joint=None, missing_mesh=None, joint_name="leg{i}_{kind}") -> Path:
+    """A URDF with `legs` legs in pairs along +-y (hip/knee/ankle each, named by `joint_name`),
+    a fixed servo link, and box meshes."""
     mesh_dir = tmp_path / "meshes"
     mesh_dir.mkdir(exist_ok=True)
     links, joints = [], []
@@ -60,11 +61,12 @@ def make_toy(tmp_path: Path, legs=2, drop_joint=None, missing_mesh=None) -> Path
         side = 1 if i % 2 else -1
         for kind in ("hip", "femur", "tibia"):
             add_link(f"{kind}_{i}", kind)
-        spec = [("hip", "base_link", f"hip_{i}", f"0 {0.06 * side} -0.01", "0 0 1", -0.7, 0.7),
+        x = 0.08 * ((i - 1) // 2 - (legs / 2 - 1) / 2)  # pairs spread along the body
+        spec = [("hip", "base_link", f"hip_{i}", f"{x} {0.06 * side} -0.01", "0 0 1", -0.7, 0.7),
                 ("knee", f"hip_{i}", f"femur_{i}", "0.03 0 0", "0 1 0", -1.5, 1.5),
                 ("ankle", f"femur_{i}", f"tibia_{i}", "0.08 0 0", "0 1 0", -1.0, 3.0)]
         for kind, parent, child, xyz, axis, lo, hi in spec:
-            name = f"leg{i}_{kind}"
+            name = joint_name.format(i=i, kind=kind)
             if name != drop_joint:
                 joints.append(JOINT.format(name=name, type="revolute", xyz=xyz, parent=parent, child=child,
                                            axis=axis, lo=lo, hi=hi))
@@ -170,3 +172,75 @@ def test_cli_reports_errors_without_traceback(tmp_path, capsys):
     assert convert.main([str(urdf), "-o", str(tmp_path / "x.xml")]) == 2
     assert "error: leg 'leg1' lacks joint(s) ['leg1_hip']" in capsys.readouterr().err
     assert not (tmp_path / "x.xml").exists()
+
+
+QUAD = "{kind}_{i}x"  # joint names the default pattern does not match
+QUAD_LEGS = " ".join(f"l{i}:hip_{i}x,knee_{i}x,ankle_{i}x" for i in range(1, 5))
+
+
+def test_other_robot_with_a_leg_mapping_trains_on_both_engines(tmp_path):
+    """A 4-legged robot with its own joint names: converted with --legs, then stepped in MJX and MuJoCo C."""
+    import jax
+    import jax.numpy as jp
+
+    import hexa_mjx
+    from hexa_mjx.env_config import EnvConfig
+    from hexa_mjx.native import NativeEnv
+
+    urdf = make_toy(tmp_path, legs=4, joint_name=QUAD)
+    with pytest.raises(convert.ConversionError, match="no leg joints found"):
+        convert.convert(urdf)  # the default naming finds nothing
+    out = tmp_path / "quad.xml"
+    assert convert.main([str(urdf), "-o", str(out), "--legs", QUAD_LEGS]) == 0
+    env = hexa_mjx.make_env(model_path=str(out))
+    assert (env.action_size, env.observation_size) == (12, 3 + 4 + 3 + 3 + 12 + 12 + 3)
+    assert [env.mj_model.geom(g).name for g in env.feet] == [f"l{i}_foot" for i in range(1, 5)]
+    assert sorted(set(env.geom_leg[env.geom_leg >= 0])) == [0, 1, 2, 3]
+    state = jax.jit(env.reset)(jax.random.PRNGKey(0))
+    native = NativeEnv(EnvConfig(model_path=str(out)))
+    np.testing.assert_allclose(native.reset(seed=0), state.obs, atol=1e-5)  # the same settled start
+    # The toy is too weak to stand (it rests on its torso): both engines count the same contacts.
+    assert tuple(map(int, env.contact_counts(state.pipeline_state))) == tuple(map(int, native.contact_counts()))
+    assert int(env.contact_counts(state.pipeline_state)[1]) > 0
+    state = jax.jit(env.step)(state, jp.full(12, 0.1))
+    assert np.isfinite(float(state.reward)) and np.isfinite(native.step(np.full(12, 0.1))[1])
+    obs = NativeEnv(EnvConfig(task="navigate", model_path=str(out))).reset(seed=0)
+    assert obs.shape == (2 + 1 + 1 + 3 + 3 + 3 + 12 * 3,)
+
+
+def test_eight_legs_convert_with_a_mapping(tmp_path):
+    urdf = make_toy(tmp_path, legs=8, joint_name=QUAD)
+    legs = " ".join(f"l{i}:hip_{i}x,knee_{i}x,ankle_{i}x" for i in range(1, 9))
+    model = mujoco.MjModel.from_xml_string(convert.convert(urdf, legs))
+    assert model.nu == 24 and sum(model.geom(g).name.endswith("_foot") for g in range(model.ngeom)) == 8
+
+
+@pytest.mark.parametrize("legs,message", [
+    ("l1:hip_1x,knee_1x,ankle_1x l2:hip_2x,knee_9x", r"names joint\(s\) \['knee_9x'\] that are not revolute"),
+    ("l1-hip_1x", "is not NAME:JOINT,JOINT"),
+    ("l1:hip_1x l1:hip_2x", "names leg 'l1' twice"),
+    ("l1:hip_1x l2:hip_1x", "to more than one leg"),
+])
+def test_leg_mapping_errors(tmp_path, legs, message):
+    urdf = make_toy(tmp_path, legs=2, joint_name=QUAD)
+    with pytest.raises(convert.ConversionError, match=message):
+        convert.convert(urdf, legs)
+
+
+def test_meshes_in_the_current_directory_are_ignored(toy, tmp_path, monkeypatch):
+    """A stray meshes/ folder where the command runs must not change the robot."""
+    urdf, expected = toy
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "meshes").mkdir()
+    for mesh in (urdf.parent / "meshes").iterdir():  # same names, boxes ten times larger
+        write_box_stl(tmp_path / "meshes" / mesh.name, (-0.5, -0.5, -0.5), (0.5, 0.5, 0.5))
+    got = mujoco.MjModel.from_xml_string(convert.convert(urdf))
+    np.testing.assert_allclose(got.geom_size, expected.geom_size)
+
+
+def test_cli_output_errors(toy, tmp_path, capsys):
+    urdf, _ = toy
+    assert convert.main([str(urdf), "-o", str(tmp_path)]) == 2
+    assert "is a folder" in capsys.readouterr().err and not list(tmp_path.glob("*.tmp"))
+    assert convert.main([str(urdf), "-o", "/proc/hexa_mjx_test.xml"]) == 2  # unwritable, even for root
+    assert "cannot write /proc/hexa_mjx_test.xml" in capsys.readouterr().err

@@ -1,5 +1,7 @@
 """The MJX environment: shapes, batching, actions, contacts, termination, episode boundaries."""
 
+import dataclasses
+
 import jax
 import jax.numpy as jp
 import mujoco
@@ -292,3 +294,55 @@ def test_contact_cap_replaces_the_files_own(tmp_path):
     assert _load_model(path, 0).nnumeric == 0  # 0 means every slot, whatever the file says
     capped = _load_model(path, 12)
     assert capped.nnumeric == 1 and capped.numeric("max_contact_points").data.tolist() == [12.0]
+
+
+def test_a_failed_leg_gives_no_torque_and_the_policy_is_not_told(env):
+    from hexa_mjx.native import NativeEnv
+
+    limp = hexa_mjx.make_env(disabled_legs=(3,))
+    state = jax.jit(limp.reset)(jax.random.PRNGKey(0))
+    np.testing.assert_array_equal(state.info["failed_legs"], [0, 0, 1, 0, 0, 0])
+    step = jax.jit(limp.step)
+    action = jp.full(18, 0.8)
+    for _ in range(20):
+        state = step(state, action)
+    force = np.asarray(state.pipeline_state.actuator_force).reshape(6, 3)
+    assert np.abs(force[2]).max() < 1e-5 and np.abs(force[[0, 1, 3, 4, 5]]).max() > 0.1  # N*m
+    # ctrl holds the policy's command, failed leg included (the navigation observation reads it)
+    lo, hi = env.mj_model.actuator_ctrlrange.T
+    np.testing.assert_allclose(state.pipeline_state.ctrl, lo + 0.9 * (hi - lo), atol=1e-5)
+    # The native engine fails the same servos; "locked" holds them at the start pose's angles.
+    native = NativeEnv(limp.config)
+    native.reset(seed=0)
+    for _ in range(20):
+        native.step(np.asarray(action))
+    assert np.abs(native.data.actuator_force[6:9]).max() < 1e-9
+    locked = NativeEnv(dataclasses.replace(limp.config, failure_mode="locked"))
+    locked.reset(seed=0)
+    for _ in range(20):
+        locked.step(np.asarray(action))
+    # Its servos pull toward the start angles (within their 5 N*m), not toward the command.
+    q, hold = locked.data.qpos[7 + 6:7 + 9], locked.robot.hold_ctrl[6:9]
+    # (the force is from the last physics step's start, q from its end: 0.05 N*m of slack)
+    np.testing.assert_allclose(locked.data.actuator_force[6:9], np.clip(robot.KP * (hold - q), -5, 5), atol=0.05)
+
+
+def test_random_leg_failure_is_drawn_per_episode():
+    env = hexa_mjx.make_env(leg_failure="random", leg_failure_rate=0.5)
+    failed = np.asarray(jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(0), 2000)).info["failed_legs"])
+    assert set(failed.sum(1).tolist()) == {0.0, 1.0}  # one leg or none
+    assert abs(failed.sum(1).mean() - 0.5) < 0.05 and failed.sum(0).min() > 100  # every leg fails sometimes
+
+
+@pytest.mark.parametrize("settings,message", [
+    (dict(disabled_legs=(7,)), "leg 7 does not exist"),
+    (dict(disabled_legs=(1, 2, 3, 4, 5, 6)), "disables all 6 legs"),
+    (dict(disabled_legs=(0,)), "leg numbers from 1"),
+    (dict(disabled_legs=(2, 2)), "names a leg twice"),
+    (dict(leg_failure="sometimes"), "leg_failure is 'none' or 'random'"),
+    (dict(failure_mode="broken"), "failure_mode is 'limp' or 'locked'"),
+    (dict(leg_failure="random", leg_failure_rate=1.5), "leg_failure_rate is a probability"),
+])
+def test_leg_failure_settings_are_checked(settings, message):
+    with pytest.raises(ValueError, match=message):
+        hexa_mjx.make_env(**settings)

@@ -167,6 +167,9 @@ def test_eval_writes_video_and_metrics(trained, cache_env, tmp_path):
     assert "floor contacts per step, before goal" in proc.stdout
     assert result["config"]["max_contact_points"] == 0 and "floor contact points at once, most" in proc.stdout
     assert 0 < result["summary"]["contact_points_max"] <= 40
+    # 20 steps are too few to see a stride: the gait analysis says so instead of inventing one.
+    assert result["summary"]["gait"]["class"] == "irregular" and "gait class" in proc.stdout
+    assert (out / "gait.png").stat().st_size > 1000 and len(result["per_episode"]["gait_class"]) == 3
     video = out / "episode_0.mp4"
     assert video.stat().st_size > 1000
     frames = np.array([f for f in imageio.get_reader(video)])

@@ -12,7 +12,7 @@ from hexa_mjx.rewards import TASK_REWARDS
 
 
 class GoalEnv(HexapodEnv):
-    """One goal on +x; the report's 52-D observation (hexa_mjx.observations.LAYOUTS["goal"])."""
+    """One goal on +x; the report's 52-D observation (hexa_mjx.observations.layout)."""
 
     name = "goal"
     rewards = TASK_REWARDS["goal"]

@@ -38,7 +38,7 @@ class NavigateEnv(HexapodEnv):
         return self._draw_goal(data.qpos[:2], rng)
 
     def observe(self, data: mjx.Data) -> jax.Array:
-        """67 values, heading frame (hexa_mjx.observations.LAYOUTS["navigate"])."""
+        """67 values, heading frame (hexa_mjx.observations.layout)."""
         return navigate_observation(data.qpos, data.qvel, data.ctrl, self.goal(data), self.robot.ctrl_lo,
                                     self.robot.ctrl_hi, self.distance_cap)
 
