@@ -34,7 +34,7 @@ with contextlib.redirect_stdout(io.StringIO()):
 from hexa_mjx import rewards  # noqa: E402
 from hexa_mjx.env_config import EnvConfig, check_config  # noqa: E402
 from hexa_mjx.kinematics import fell as flipped, quat_mul  # noqa: E402
-from hexa_mjx.model import RobotModel, action_to_ctrl, failed_ctrl  # noqa: E402
+from hexa_mjx.model import RobotModel, action_to_ctrl, failed_ctrl, servo_power  # noqa: E402
 
 __all__ = ["EnvConfig", "HexapodEnv", "floor_contacts"]
 
@@ -232,8 +232,9 @@ class HexapodEnv(Env):
     def reward_terms(self, prev: mjx.Data, data: mjx.Data, done, completed) -> dict:
         """Unscaled values of the active reward terms for the transition prev -> data."""
         bad, non_foot = self.contact_counts(data)
+        power = servo_power(data.actuator_force, data.qvel, self.robot.actuator_dof)
         return rewards.terms(self._active_terms(), self.config, prev.qpos, data.qpos, data.qvel, self.goal(data),
-                             bad, non_foot, done, completed)
+                             bad, non_foot, done, completed, power)
 
     # -- what a task defines ----------------------------------------------------
 

@@ -13,6 +13,7 @@ import jax.numpy as jp
 import numpy as np
 
 from hexa_mjx import checkpoints, config, gait, nav_metrics, plots, robot, training
+from hexa_mjx.model import servo_power
 from hexa_mjx.video import VIDEO_FPS, render_video
 
 
@@ -42,11 +43,6 @@ def foot_stance(env, data) -> jax.Array:
     return (on_floor[None] & (geom[None] == jp.asarray(env.feet)[:, None])).any(1)
 
 
-def actuator_power(env, data) -> jax.Array:
-    """Mechanical power of the servos, sum over joints of |torque x joint velocity|, W."""
-    return jp.abs(data.actuator_force * data.qvel[env.robot.actuator_dof]).sum()
-
-
 def rollout(env, policy, num_episodes: int, seed: int = 0):
     """Run `num_episodes` episodes in parallel to their end; returns per-step arrays (time first)
     of qpos, the goal each step is scored against, reward, done, distance, floor contacts per
@@ -73,7 +69,8 @@ def rollout(env, policy, num_episodes: int, seed: int = 0):
                    "reward": nxt.reward, "done": nxt.done, "alive": alive,
                    "contacts": jax.vmap(lambda d: group_contacts(env, d, groups))(nxt.pipeline_state),
                    "stance": jax.vmap(lambda d: foot_stance(env, d))(nxt.pipeline_state),
-                   "power": jax.vmap(lambda d: actuator_power(env, d))(nxt.pipeline_state),
+                   "power": jax.vmap(lambda d: servo_power(d.actuator_force, d.qvel, env.robot.actuator_dof))(
+                       nxt.pipeline_state),
                    **{k: v for k, v in nxt.metrics.items()
                       if k.startswith("reward/") or k in ("distance", "fell", "goal_bonus", "nonfinite", "goals_reached")}}
             return (nxt, alive * (1.0 - nxt.done)), out

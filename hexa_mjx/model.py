@@ -113,6 +113,11 @@ class RobotModel:
         return bad.sum(), (on_floor & ~xp.asarray(self.geom_is_foot)[other]).sum()
 
 
+def servo_power(actuator_force, qvel, actuator_dof):
+    """Mechanical power of the servos, sum over joints of |torque x joint velocity|, W."""
+    return abs(actuator_force * qvel[actuator_dof]).sum()
+
+
 def failed_ctrl(target, joint_angles, failed_actuators, mode: str, hold):
     """Servo targets with failed actuators disabled: a limp servo's target follows its joint's
     angle (no spring torque), a locked one's is `hold`. NumPy or JAX arrays."""

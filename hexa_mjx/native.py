@@ -21,7 +21,7 @@ import numpy as np
 from hexa_mjx import rewards
 from hexa_mjx.env_config import EnvConfig, check_config
 from hexa_mjx.kinematics import fell, quat_mul
-from hexa_mjx.model import RobotModel, action_to_ctrl, failed_ctrl
+from hexa_mjx.model import RobotModel, action_to_ctrl, failed_ctrl, servo_power
 from hexa_mjx.observations import TASKS, goal_observation, layout, navigate_observation
 
 
@@ -138,8 +138,9 @@ class NativeEnv:
         reached = dist < self.config.success_radius
         completed = self._goal_completed(reached)
         bad, non_foot = self.contact_counts()
+        power = servo_power(data.actuator_force, data.qvel, self.robot.actuator_dof)
         terms = rewards.terms(self.active, self.config, prev_qpos, data.qpos, data.qvel, goal, bad, non_foot,
-                              np.bool_(done), np.bool_(completed))
+                              np.bool_(done), np.bool_(completed), power)
         reward = float(sum(self.scales[name] * value for name, value in terms.items()))
         self.t += 1
         if completed:

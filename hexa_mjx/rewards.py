@@ -47,6 +47,11 @@ def energy(joint_vel):
     return (joint_vel * joint_vel).sum()
 
 
+def mechanical_power(power):
+    """Servo power, sum over joints of |torque x joint velocity|, W (Fu et al.'s energy term)."""
+    return power
+
+
 def contact_quality(bad_leg_contacts):
     """Leg contacts with the floor while that leg's foot is lifted (leg-side dragging)."""
     return bad_leg_contacts.astype("float32")
@@ -74,13 +79,14 @@ def forward_velocity(vel_xy):
 
 TERMS = {
     f.__name__: f
-    for f in (goal_approach, goal_reached, velocity_alignment, goal_bonus, stability, height, energy, contact_quality,
-              body_contact, termination, forward_progress, forward_velocity)
+    for f in (goal_approach, goal_reached, velocity_alignment, goal_bonus, stability, height, energy, mechanical_power,
+              contact_quality, body_contact, termination, forward_progress, forward_velocity)
 }
 
-def terms(names, config, prev_qpos, qpos, qvel, goal_xy, bad_contacts, non_foot_contacts, done, completed) -> dict:
+def terms(names, config, prev_qpos, qpos, qvel, goal_xy, bad_contacts, non_foot_contacts, done, completed,
+          power) -> dict:
     """Unscaled values of the terms `names` for the transition prev_qpos -> (qpos, qvel), with
-    `goal_xy` the step's goal, contact counts of the new state, and `config` an EnvConfig.
+    `goal_xy` the step's goal, contact counts and servo power (W) of the new state, and `config` an EnvConfig.
     Either engine's arrays; under jit, XLA drops the inputs no named term uses."""
     xp = namespace(qpos)
     xy, prev_xy, vel_xy = qpos[:2], prev_qpos[:2], qvel[:2]
@@ -97,6 +103,7 @@ def terms(names, config, prev_qpos, qpos, qvel, goal_xy, bad_contacts, non_foot_
         "stability": (roll, pitch),
         "height": (qpos[2], config.target_height),
         "energy": (qvel[6:],),
+        "mechanical_power": (power,),
         "contact_quality": (bad_contacts,),
         "body_contact": (non_foot_contacts,),
         "termination": (done,),
@@ -107,6 +114,7 @@ def terms(names, config, prev_qpos, qpos, qvel, goal_xy, bad_contacts, non_foot_
 
 
 _SHAPING = {
+    "mechanical_power": 0.0,
     "stability": -0.5,
     "height": -2.0,
     "energy": -1e-4,
@@ -126,11 +134,17 @@ VARIANTS: dict[str, dict[str, float]] = {
     # Report section 4.2 baseline: move along +x, no goal bonus.
     "forward_motion": {"goal_approach": 0.0, "velocity_alignment": 0.0, "goal_bonus": 0.0, "goal_reached": 0.0,
                        "forward_progress": 1000.0, "forward_velocity": 5.0, **_SHAPING},
+    # In the spirit of Fu et al. (CoRL 2021): the report's goal terms and the fall penalty, plus the
+    # servos' mechanical power, and none of the hand-made gait shaping (posture, height, contacts).
+    # 0.01 per W: the report policy's ~450 W of jittery stepping would cost about half its approach reward.
+    "energy": {"goal_approach": 1000.0, "velocity_alignment": 5.0, "goal_bonus": 100.0, "goal_reached": 0.0,
+               "forward_progress": 0.0, "forward_velocity": 0.0, "mechanical_power": -0.01, "stability": 0.0,
+               "height": 0.0, "energy": 0.0, "contact_quality": 0.0, "body_contact": 0.0, "termination": -200.0},
 }
 
 # Each task's reward variants, its default first.
 TASK_REWARDS: dict[str, tuple[str, ...]] = {
-    "goal": ("goal_directed", "forward_motion"),
+    "goal": ("goal_directed", "forward_motion", "energy"),
     "navigate": ("navigate",),
 }
 

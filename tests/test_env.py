@@ -346,3 +346,14 @@ def test_random_leg_failure_is_drawn_per_episode():
 def test_leg_failure_settings_are_checked(settings, message):
     with pytest.raises(ValueError, match=message):
         hexa_mjx.make_env(**settings)
+
+
+def test_energy_reward_pays_for_servo_power():
+    env = hexa_mjx.make_env(reward="energy")
+    state = jax.jit(env.step)(jax.jit(env.reset)(jax.random.PRNGKey(0)), jp.full(18, 0.5))
+    data = state.pipeline_state
+    power = np.abs(np.asarray(data.actuator_force) * np.asarray(data.qvel)[6:]).sum()  # W, 18 hinges after the free joint
+    assert power > 1.0
+    assert float(state.metrics["reward/mechanical_power"]) == pytest.approx(-0.01 * power, rel=1e-5)
+    # none of the report's gait shaping
+    assert not {"reward/stability", "reward/height", "reward/contact_quality", "reward/body_contact"} & set(state.metrics)

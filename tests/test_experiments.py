@@ -116,3 +116,12 @@ def test_navigation_grids(tmp_path):
     assert ablation[1].config.run_dir == str(tmp_path / "ablation-navigate" / "no_contact-s0")
     with pytest.raises(ValueError, match="run it without --task"):
         experiments.grid("main", tmp_path, task="navigate")
+
+
+def test_energy_grid(tmp_path):
+    runs = experiments.grid("energy", tmp_path, timesteps=1000)
+    assert sorted((r.config.reward, r.seed) for r in runs) == [(w, s) for w in ("energy", "goal_directed")
+                                                              for s in range(3)]
+    assert runs[0].config.run_dir == str(tmp_path / "energy" / "goal_directed-s0")
+    with pytest.raises(ValueError, match="compares rewards of the report's task"):
+        experiments.grid("energy", tmp_path, task="navigate")
