@@ -18,7 +18,7 @@ import jax
 import jax.numpy as jp
 from flax import linen
 
-from hexa_mjx.checkpoints import checkpoint_dir, list_checkpoints, load_checkpoint, remove_temporaries, save_checkpoint
+from hexa_mjx.checkpoints import checkpoint_dir, list_checkpoints, load_latest, remove_temporaries, save_checkpoint
 from hexa_mjx.config import TrainConfig, make_env_for, validate
 from hexa_mjx.jax_setup import devices_for, prepare_jax
 from hexa_mjx.progress import Logger, keep_rows_up_to
@@ -103,8 +103,11 @@ def train(cfg: TrainConfig) -> dict:
     if remove_temporaries(run_dir):
         print(f"removed half-written checkpoint folders in {checkpoint_dir(run_dir)}")
     if cfg.resume and list_checkpoints(run_dir):
-        start_step, restore = load_checkpoint(list_checkpoints(run_dir)[-1][1], init_params(cfg, env))
-        print(f"resuming {run_dir} from step {start_step:,}")
+        start_step, restore = load_latest(run_dir, init_params(cfg, env))
+        if restore is None:
+            print(f"{run_dir} has no readable checkpoint: starting again from step 0")
+        else:
+            print(f"resuming {run_dir} from step {start_step:,}")
     elif cfg.resume:
         print(f"{run_dir} has no complete checkpoint yet (it stopped before its first): starting again from step 0")
     # One row per evaluation: rows past the checkpoint go, and the checkpoint's own evaluation is

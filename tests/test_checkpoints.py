@@ -1,0 +1,50 @@
+"""Checkpoint integrity: a digest and a finiteness check on load, and resume's fall-back."""
+
+import json
+
+import jax
+import numpy as np
+import pytest
+
+from hexa_mjx import checkpoints, config, training
+
+
+@pytest.fixture(scope="module")
+def template(env):
+    return training.init_params(config.TrainConfig(hidden=[8, 8]), env)
+
+
+def save_two(run_dir, template):
+    bumped = jax.tree.map(lambda x: x + 1 if np.issubdtype(np.asarray(x).dtype, np.floating) else x, template)
+    checkpoints.save_checkpoint(run_dir, 100, template)
+    return checkpoints.save_checkpoint(run_dir, 200, bumped)
+
+
+def test_a_damaged_checkpoint_is_an_error_and_resume_falls_back(template, tmp_path, capsys):
+    newest = save_two(tmp_path, template)
+    assert "sha256" in json.loads((newest / "step.json").read_text())
+    assert checkpoints.load_latest(tmp_path, template)[0] == 200
+    biggest = max((f for f in (newest / "params").rglob("*") if f.is_file()), key=lambda f: f.stat().st_size)
+    data = bytearray(biggest.read_bytes())
+    data[len(data) // 2:len(data) // 2 + 64] = b"\xff" * 64  # a few bytes changed on disk
+    biggest.write_bytes(bytes(data))
+    with pytest.raises(RuntimeError, match="do not match the checksum"):
+        checkpoints.load_checkpoint(newest, template)
+    step, params = checkpoints.load_latest(tmp_path, template)
+    assert step == 100 and "falling back to the checkpoint before it" in capsys.readouterr().err
+    np.testing.assert_array_equal(jax.tree.leaves(params)[0], jax.tree.leaves(template)[0])
+
+
+def test_non_finite_parameters_are_refused(template, tmp_path):
+    poisoned = jax.tree.map(lambda x: x * np.nan if np.issubdtype(np.asarray(x).dtype, np.floating) else x, template)
+    path = checkpoints.save_checkpoint(tmp_path, 100, poisoned)
+    with pytest.raises(RuntimeError, match="non-finite"):
+        checkpoints.load_checkpoint(path, template)
+    assert checkpoints.load_latest(tmp_path, template) == (0, None)
+
+
+def test_saving_and_loading_print_nothing(template, tmp_path, capfd):
+    path = checkpoints.save_checkpoint(tmp_path, 100, template)
+    checkpoints.load_checkpoint(path, template)
+    out, err = capfd.readouterr()
+    assert out == "" and err == ""
