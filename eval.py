@@ -15,8 +15,12 @@ Runs N episodes with the deterministic policy batched on MJX, prints a table, wr
 import argparse
 import sys
 
-from hexa_mjx import evaluation, jax_setup, nav_metrics
-from hexa_mjx.tasks import TASKS
+try:
+    from hexa_mjx import evaluation, jax_setup, nav_metrics
+    from hexa_mjx.tasks import TASKS
+except ImportError as e:  # a missing package, or a MUJOCO_GL that MuJoCo cannot use
+    print(f"error: {e}", file=sys.stderr)
+    sys.exit(2)
 
 
 def main(argv=None) -> int:

@@ -77,7 +77,11 @@ def main(argv=None) -> int:
     args = parse_args(argv)
     if args.viewer:
         os.environ["MUJOCO_GL"] = "glfw"  # the window's OpenGL, not the off-screen default
-    from hexa_mjx import player, video
+    try:
+        from hexa_mjx import player, video
+    except ImportError as e:  # a missing package, or a MUJOCO_GL that MuJoCo cannot use
+        print(f"error: {e}", file=sys.stderr)
+        return 2
 
     try:
         with tempfile.TemporaryDirectory() as scratch:
@@ -96,7 +100,7 @@ def main(argv=None) -> int:
             out.parent.mkdir(parents=True, exist_ok=True)
         if not player.model_matches(policy, env):
             print(f"note: {env.config.model_path} differs from the model the policy was trained on", file=sys.stderr)
-    except (FileNotFoundError, ValueError, OSError) as e:
+    except (FileNotFoundError, ValueError, OSError, RuntimeError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
 

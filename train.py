@@ -10,7 +10,11 @@ Flags and defaults: `python train.py --help` (hexa_mjx/config.py, TrainConfig).
 import signal
 import sys
 
-from hexa_mjx import config, jax_setup, training
+try:
+    from hexa_mjx import config, jax_setup, training
+except ImportError as e:  # a missing package, or a MUJOCO_GL that MuJoCo cannot use
+    print(f"error: {e}", file=sys.stderr)
+    sys.exit(2)
 
 
 def _interrupt(signum, frame):

@@ -5,6 +5,11 @@ import os
 
 # Off-screen rendering: MuJoCo reads MUJOCO_GL when first imported. Unless the user chose, take
 # EGL, else OSMesa, whichever library is installed (evaluation explains what to install if neither).
+GL_BACKENDS = ("egl", "osmesa", "glfw")  # the values of MUJOCO_GL that MuJoCo accepts
+if os.environ.get("MUJOCO_GL") and os.environ["MUJOCO_GL"].lower() not in GL_BACKENDS:
+    # MuJoCo's own import would fail with a traceback; say what to do instead.
+    raise ImportError(f"MUJOCO_GL={os.environ['MUJOCO_GL']} is not one of {', '.join(GL_BACKENDS)}: unset it to let "
+                      "hexa_mjx choose, or set one of those")
 if not os.environ.get("MUJOCO_GL"):
     for _backend, _lib in (("egl", "EGL"), ("osmesa", "OSMesa")):
         if ctypes.util.find_library(_lib):

@@ -217,6 +217,15 @@ def validate(cfg: TrainConfig) -> TrainConfig:
         raise ConfigError(f"--model {cfg.model} is not a file; convert a URDF with "
                           f"`python -m hexa_mjx.convert URDF -o {cfg.model}`")
     make_env_for(cfg)  # a bad ctrl_hz, task or reward raises here, before compiling
+    if run_dir.exists() and not run_dir.is_dir():
+        raise ConfigError(f"--run_dir {run_dir} is a file, not a folder; choose another --run_dir")
+    try:  # the run's folder, made only once every setting is known to be good
+        run_dir.mkdir(parents=True, exist_ok=True)
+        probe = run_dir / ".write-test"
+        probe.write_text("")
+        probe.unlink()
+    except OSError as e:
+        raise ConfigError(f"cannot write to --run_dir {run_dir} ({e.strerror or e}); choose another") from None
     return cfg
 
 

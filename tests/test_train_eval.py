@@ -229,6 +229,19 @@ def test_train_rejects_bad_input(trained, tmp_path):
     proc = run("train.py", *TINY, "--cpu_devices", "3", "--run_dir", str(tmp_path / "b"), check=False)
     assert proc.returncode == 2 and "3 devices must divide --num_envs (8)" in proc.stderr
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+    (tmp_path / "file").write_text("")
+    proc = run("train.py", *TINY, "--run_dir", str(tmp_path / "file"), check=False)
+    assert proc.returncode == 2 and "is a file, not a folder" in proc.stderr
+    proc = run("train.py", *TINY, "--run_dir", "/proc/hexa_mjx_run", check=False)  # unwritable, even for root
+    assert proc.returncode == 2 and "cannot write to --run_dir /proc/hexa_mjx_run" in proc.stderr
+
+
+@pytest.mark.parametrize("script", [["train.py"], ["eval.py", "--ckpt", "policies/goal"],
+                                    ["play.py", "--policy", "policies/goal.onnx"]])
+def test_an_unusable_mujoco_gl_is_one_line(script):
+    proc = run(*script, env={**os.environ, "MUJOCO_GL": "bogus"}, check=False)
+    assert proc.returncode == 2 and proc.stderr.startswith("error: MUJOCO_GL=bogus is not one of egl, osmesa, glfw")
+    assert "Traceback" not in proc.stderr
 
 
 def test_eval_rejects_corrupted_checkpoint(trained, tmp_path):
