@@ -85,6 +85,12 @@ class TrainConfig:
     failure_mode: str = dataclasses.field(default="limp", metadata={
         "help": "a failed leg's servos give no torque (limp) or hold the start angles (locked)",
         "choices": ["limp", "locked"]})
+    randomize: bool = dataclasses.field(default=False, metadata={
+        "help": "domain randomization: each environment its own friction, link masses, torso payload, servo gain "
+                "and force limit, joint damping and armature (ranges: hexa_mjx.randomization.Ranges)"})
+    push_speed: float = dataclasses.field(default=0.0, metadata={
+        "help": "m/s, pushes: the torso's planar velocity is kicked by up to this every --push_interval (0: none)"})
+    push_interval: float = dataclasses.field(default=3.0, metadata={"help": "s between pushes"})
     max_contact_points: int = dataclasses.field(default=0, metadata={
         "help": "MJX keeps only this many deepest robot-floor contacts per step (0: all 40 slots)"})
     num_eval_envs: int = dataclasses.field(default=32, metadata={
@@ -255,5 +261,6 @@ def make_env_for(cfg: TrainConfig, task: str = "", **overrides):
                     start_joint_noise=cfg.start_joint_noise, start_yaw_noise=cfg.start_yaw_noise,
                     max_contact_points=cfg.max_contact_points, goal_min_distance=cfg.goal_min_distance,
                     goal_max_distance=cfg.goal_max_distance, goal_distance_cap=cfg.goal_max_distance,
-                    leg_failure=cfg.leg_failure, leg_failure_rate=cfg.leg_failure_rate, failure_mode=cfg.failure_mode)
+                    leg_failure=cfg.leg_failure, leg_failure_rate=cfg.leg_failure_rate, failure_mode=cfg.failure_mode,
+                    push_speed=cfg.push_speed, push_interval=cfg.push_interval)
     return make_env(cfg.reward, cfg.task, **{**settings, **overrides})

@@ -118,6 +118,9 @@ class HexapodEnv(Env):
         prev = state.pipeline_state
         target = action_to_ctrl(action, self.robot.ctrl_lo, self.robot.ctrl_hi)
         data = prev.replace(ctrl=target)
+        if self.config.push_speed:  # a kick to the torso's planar velocity, every push_interval
+            kick = self.push_kick(state.info["t"], jax.random.fold_in(state.info["rng"], 7))
+            data = data.replace(qvel=data.qvel.at[:2].add(kick))
         if self.leg_failures:  # failed servos, re-targeted at every physics step
             failed = state.info["failed_legs"][self.robot.actuator_leg] > 0
 
@@ -167,6 +170,14 @@ class HexapodEnv(Env):
                        final_distance=jp.where(over, dist, 0.0), final_success=jp.where(over, success, 0.0))
         return state.replace(pipeline_state=data, obs=self.observe(data), reward=reward,
                              done=done.astype(jp.float32), metrics=metrics, info=info)
+
+    def push_kick(self, t: jax.Array, rng: jax.Array) -> jax.Array:
+        """The planar velocity kick (m/s) at episode step `t`: nonzero every `push_interval` s."""
+        every = max(int(round(self.config.push_interval / self.dt)), 1)
+        k_angle, k_speed = jax.random.split(rng)
+        angle = jax.random.uniform(k_angle, minval=-jp.pi, maxval=jp.pi)
+        speed = jax.random.uniform(k_speed, maxval=self.config.push_speed)
+        return jp.where((t > 0) & (t % every == 0), speed, 0.0) * jp.stack([jp.cos(angle), jp.sin(angle)])
 
     @property
     def leg_failures(self) -> bool:

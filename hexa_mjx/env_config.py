@@ -59,6 +59,10 @@ class EnvConfig:
     leg_failure: str = "none"  # "none" | "random"
     leg_failure_rate: float = 0.5  # probability that an episode has a failed leg (random)
     failure_mode: str = "limp"  # "limp" | "locked"
+    # Pushes: every `push_interval` s the torso's planar velocity gets a kick in a random direction
+    # of a speed uniform in [0, push_speed] m/s (0: no pushes).
+    push_speed: float = 0.0  # m/s
+    push_interval: float = 3.0  # s
 
 
 def check_config(config: EnvConfig) -> None:
@@ -80,6 +84,10 @@ def check_config(config: EnvConfig) -> None:
     if config.max_contact_points < 0:
         raise ValueError(f"max_contact_points must be 0 (every contact slot) or positive, "
                          f"got {config.max_contact_points}")
+    if not (math.isfinite(config.push_speed) and 0 <= config.push_speed <= 5):
+        raise ValueError(f"push_speed is a speed in m/s from 0 (no pushes) to 5, got {config.push_speed}")
+    if not (math.isfinite(config.push_interval) and config.push_interval > 0):
+        raise ValueError(f"push_interval must be a time above 0 s, got {config.push_interval}")
     if config.leg_failure not in ("none", "random"):
         raise ValueError(f"leg_failure is 'none' or 'random', got {config.leg_failure!r}")
     if config.failure_mode not in ("limp", "locked"):

@@ -119,6 +119,10 @@ class NativeEnv:
         model, data = self.mj_model, self.data
         prev_qpos, prev_qvel = data.qpos.copy(), data.qvel.copy()
         target = action_to_ctrl(np.nan_to_num(action), self.robot.ctrl_lo, self.robot.ctrl_hi)
+        every = max(int(round(self.config.push_interval / self.dt)), 1)
+        if self.config.push_speed and self.t > 0 and self.t % every == 0:  # as HexapodEnv.push_kick
+            angle, speed = self.rng.uniform(-np.pi, np.pi), self.rng.uniform(0, self.config.push_speed)
+            data.qvel[:2] += speed * np.array([np.cos(angle), np.sin(angle)])
         failed = self.failed_legs[self.robot.actuator_leg] > 0
         data.ctrl[:] = target
         for _ in range(self.n_substeps):

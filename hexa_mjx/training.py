@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jp
 from flax import linen
 
+from hexa_mjx import randomization
 from hexa_mjx.checkpoints import checkpoint_dir, list_checkpoints, load_latest, remove_temporaries, save_checkpoint
 from hexa_mjx.config import TrainConfig, make_env_for, validate
 from hexa_mjx.jax_setup import devices_for, prepare_jax
@@ -82,11 +83,12 @@ def evals_for(cfg: TrainConfig, remaining: int) -> int:
     return 1 + max(1, math.ceil((cfg.num_evals - 1) * remaining / cfg.num_timesteps))
 
 
-def wrap_env_fn(env):
-    """brax's training wrappers, or ours that redraw the start state (and first goal) every episode."""
+def wrap_env_fn(env, randomized: bool = False):
+    """brax's training wrappers, or ours that redraw the start state (and first goal) every episode
+    and give each environment its own randomized model."""
     from hexa_mjx import wrappers
 
-    return wrappers.wrap_for_training if env.fresh_starts else None
+    return wrappers.wrap_for_training if env.fresh_starts or randomized else None
 
 
 def train(cfg: TrainConfig) -> dict:
@@ -139,8 +141,10 @@ def train(cfg: TrainConfig) -> dict:
           f"{cfg.num_envs} envs ({devices} {jax.default_backend()} device{'s' * (devices > 1)}), "
           f"{cfg.steps_per_update:,} steps per update -> {run_dir}", flush=True)
     logger.compiling()
+    randomization_fn = randomization.randomization_fn(env) if cfg.randomize else None
     ppo.train(environment=env, num_timesteps=remaining, **ppo_settings(cfg), seed=cfg.seed + start_step,
-              max_devices_per_host=devices, wrap_env_fn=wrap_env_fn(env),
+              max_devices_per_host=devices, wrap_env_fn=wrap_env_fn(env, cfg.randomize),
+              randomization_fn=randomization_fn,
               num_evals=evals_for(cfg, remaining), num_eval_envs=cfg.num_eval_envs, deterministic_eval=True,
               progress_fn=on_progress, policy_params_fn=on_params, restore_params=restore,
               log_training_metrics=cfg.progress, training_metrics_steps=cfg.steps_per_update)

@@ -1,8 +1,11 @@
-"""Training wrappers: brax's, except that every episode draws a fresh start state.
+"""Training wrappers: brax's, except that every episode draws a fresh start state, and each
+environment can step its own randomized physics model.
 
 brax's AutoResetWrapper restarts a finished environment from the state of its first reset, so
 start-state noise would be drawn once per environment, not once per episode. `FreshStartAutoReset`
 draws it again at every episode boundary (`HexapodEnv.restart`), from a key kept per environment.
+`RandomizedVmap` replaces brax's VmapWrapper when a `randomization_fn` gives one model per
+environment (`hexa_mjx.randomization`).
 """
 
 from __future__ import annotations
@@ -41,10 +44,34 @@ class FreshStartAutoReset(Wrapper):
         return state.replace(pipeline_state=pipeline_state, obs=obs)
 
 
+class RandomizedVmap(Wrapper):
+    """vmap over a batch of environments, each with its own mjx.Model (brax's
+    DomainRandomizationVmapWrapper for an environment that keeps its model in `mjx_model`)."""
+
+    def __init__(self, env, randomization_fn):
+        super().__init__(env)
+        self._models, self._in_axes = randomization_fn(env.unwrapped.mjx_model)
+
+    def _with_model(self, model, fn, *args):
+        base = self.env.unwrapped
+        saved, base.mjx_model = base.mjx_model, model  # swapped while tracing, so each env sees its own
+        try:
+            return fn(*args)
+        finally:
+            base.mjx_model = saved
+
+    def reset(self, rng: jax.Array) -> State:
+        return jax.vmap(lambda m, k: self._with_model(m, self.env.reset, k), in_axes=(self._in_axes, 0))(
+            self._models, rng)
+
+    def step(self, state: State, action: jax.Array) -> State:
+        return jax.vmap(lambda m, s, a: self._with_model(m, self.env.step, s, a), in_axes=(self._in_axes, 0, 0))(
+            self._models, state, action)
+
+
 def wrap_for_training(env, episode_length: int = 1000, action_repeat: int = 1, randomization_fn=None):
-    """brax's `envs.training.wrap` with `FreshStartAutoReset` in place of its AutoResetWrapper."""
-    if randomization_fn is not None:
-        raise NotImplementedError("domain randomization is not supported by FreshStartAutoReset")
-    env = brax_training.VmapWrapper(env)
+    """brax's `envs.training.wrap` with `FreshStartAutoReset` in place of its AutoResetWrapper and
+    `RandomizedVmap` in place of its VmapWrapper when there is a `randomization_fn`."""
+    env = RandomizedVmap(env, randomization_fn) if randomization_fn else brax_training.VmapWrapper(env)
     env = brax_training.EpisodeWrapper(env, episode_length, action_repeat)
     return FreshStartAutoReset(env)
