@@ -36,6 +36,12 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--waypoints", default="", help='navigate: a path "x,y x,y ..." in m from the start, or a file')
     p.add_argument("--start_joint_noise", type=float, default=None, help="rad, start-angle noise (default: trained)")
     p.add_argument("--start_yaw_noise", type=float, default=None, help="goal task: rad, start-heading noise")
+    p.add_argument("--randomize", action="store_true", help="a randomized physics model every episode (friction, "
+                   "masses, payload, servo gains and limits, damping, armature: hexa_mjx.randomization.Ranges)")
+    p.add_argument("--push_speed", type=float, default=None, help="m/s, planar kicks to the torso (default: trained)")
+    p.add_argument("--push_interval", type=float, default=None, help="s between kicks")
+    p.add_argument("--disabled_legs", default="", help='legs whose servos fail, e.g. "3" or "1 4"')
+    p.add_argument("--failure_mode", default=None, choices=["limp", "locked"], help="how a failed leg fails")
     p.add_argument("--benchmark", action="store_true", help="time the policy alone (one observation per call, "
                    "one thread) and exit")
     args = p.parse_args(argv)
@@ -89,10 +95,18 @@ def main(argv=None) -> int:
         overrides = dict(episode_length=args.episode_length, goal_distance=args.goal_distance,
                          goal_min_distance=args.goal_min_distance, goal_max_distance=args.goal_max_distance,
                          start_joint_noise=args.start_joint_noise, start_yaw_noise=args.start_yaw_noise,
-                         waypoints=waypoints_of(args.waypoints) or None)
+                         waypoints=waypoints_of(args.waypoints) or None, push_speed=args.push_speed,
+                         push_interval=args.push_interval, failure_mode=args.failure_mode)
+        if args.disabled_legs:
+            try:
+                overrides.update(disabled_legs=tuple(int(x) for x in args.disabled_legs.replace(",", " ").split()),
+                                 leg_failure="none")
+            except ValueError:
+                raise ValueError(f'--disabled_legs takes leg numbers from 1, like "3" or "1 4", got '
+                                 f'{args.disabled_legs!r}') from None
         if args.waypoints and policy.metadata["task"] != "navigate":
             raise ValueError("--waypoints is a navigate-task option; this is a goal-task policy")
-        env = player.env_for(policy, args.model, **overrides)
+        env = player.env_for(policy, args.model, randomize=args.randomize, **overrides)
         if args.json:
             out = Path(args.json)
             if out.is_dir():

@@ -13,12 +13,13 @@ play.py and the Gymnasium environments are built on it.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 
 import mujoco
 import numpy as np
 
-from hexa_mjx import rewards
+from hexa_mjx import randomization, rewards
 from hexa_mjx.env_config import EnvConfig, check_config
 from hexa_mjx.kinematics import fell, quat_mul
 from hexa_mjx.model import RobotModel, action_to_ctrl, failed_ctrl, servo_power
@@ -28,7 +29,8 @@ from hexa_mjx.observations import TASKS, goal_observation, layout, navigate_obse
 class NativeEnv:
     """One environment of a task on MuJoCo C; `observe_as` names another task's observation."""
 
-    def __init__(self, config: EnvConfig = EnvConfig(), observe_as: str = ""):
+    def __init__(self, config: EnvConfig = EnvConfig(), observe_as: str = "", ranges=None):
+        """`ranges` (hexa_mjx.randomization.Ranges): draw a randomized physics model every episode."""
         if config.task not in TASKS:
             raise ValueError(f"unknown task {config.task!r}; choose one of {list(TASKS)}")
         if observe_as and observe_as not in TASKS:
@@ -44,6 +46,7 @@ class NativeEnv:
         self.robot = RobotModel(config)
         self.mj_model, self.n_substeps = self.robot.mj_model, self.robot.n_substeps
         self.qpos0 = self.robot.qpos0
+        self.ranges, self.nominal = ranges, copy.copy(self.mj_model)
         self.data = mujoco.MjData(self.mj_model)
         self.rng = np.random.default_rng()
         self.t = self.goals = 0
@@ -84,6 +87,10 @@ class NativeEnv:
         if seed is not None:
             self.rng = np.random.default_rng(seed)
         data, robot = self.data, self.robot
+        if self.ranges is not None:  # this episode's physics, drawn as training draws each environment's
+            variant = randomization.draw(self.nominal, int(self.rng.integers(2 ** 31 - 1)), self.ranges, robot.torso)
+            for name, value in variant.items():
+                getattr(self.mj_model, name)[:] = value
         mujoco.mj_resetData(self.mj_model, data)
         qpos = robot.qpos0.copy()
         noise = self.config.start_joint_noise

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hexa_mjx import randomization
 from hexa_mjx.env_config import EnvConfig
 from hexa_mjx.export import FORMAT, METADATA_KEY
 from hexa_mjx.native import NativeEnv
@@ -55,9 +56,11 @@ class OnnxPolicy:
             obs.shape[:-1] + (-1,))
 
 
-def env_for(policy: OnnxPolicy, model_path: str | Path | None = None, **overrides) -> NativeEnv:
+def env_for(policy: OnnxPolicy, model_path: str | Path | None = None, randomize: bool = False,
+            **overrides) -> NativeEnv:
     """The native environment a policy was trained on, with `EnvConfig` overrides (goal range,
-    waypoints, episode length...); checks that the model's joints and observation match the policy."""
+    waypoints, episode length...) and, with `randomize`, randomized physics every episode; checks
+    that the model's joints and observation match the policy."""
     meta = policy.metadata
     task = meta["env_config"].get("task")
     if task not in TASKS:
@@ -72,7 +75,8 @@ def env_for(policy: OnnxPolicy, model_path: str | Path | None = None, **override
     if model_path is not None:
         settings["model_path"] = str(model_path)
     known = {f.name for f in dataclasses.fields(EnvConfig)}
-    env = NativeEnv(EnvConfig(**{k: v for k, v in settings.items() if k in known}))
+    env = NativeEnv(EnvConfig(**{k: v for k, v in settings.items() if k in known}),
+                    ranges=randomization.Ranges() if randomize else None)
     model = env.mj_model
     joints = [model.joint(model.actuator_trnid[i, 0]).name for i in range(model.nu)]
     if joints != meta["joint_order"]:

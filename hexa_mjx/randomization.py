@@ -3,6 +3,7 @@
     env = make_env(task="navigate")
     fn = randomization_fn(env, Ranges())        # brax ppo.train(..., randomization_fn=fn)
     models, in_axes = fn(env.mjx_model, keys)   # what the training wrappers vmap over
+    NativeEnv(config, ranges=Ranges())          # native MuJoCo: a new variant every episode
 
 The pattern of brax's `randomization_fn` and MuJoCo Playground's locomotion tasks: each
 environment of the batch gets its own friction, link masses, torso payload, servo gain and force
@@ -21,8 +22,6 @@ from __future__ import annotations
 import copy
 import dataclasses
 
-import jax
-import jax.numpy as jp
 import mujoco
 import numpy as np
 
@@ -86,6 +85,9 @@ def draw(model: mujoco.MjModel, seed: int, ranges: Ranges, torso: int) -> dict:
 def randomization_fn(env, ranges: Ranges = Ranges()):
     """brax's `randomization_fn(model, rng) -> (models, in_axes)` for an environment, `rng` a
     batch of keys: one model variant per key, drawn on the host when the wrappers are built."""
+    import jax
+    import jax.numpy as jp
+
     ranges.check()
     base, torso = env.robot.mj_model, env.robot.torso
 

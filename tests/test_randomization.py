@@ -116,3 +116,20 @@ def test_pushes_kick_the_torso_at_the_interval():
     assert speeds.max() <= 1.0 and speeds.min() >= 0 and 0.4 < speeds.mean() < 0.6
     with pytest.raises(ValueError, match="push_speed"):
         hexa_mjx.make_env(push_speed=-1)
+
+
+def test_native_engine_draws_a_variant_every_episode():
+    from hexa_mjx.env_config import EnvConfig
+    from hexa_mjx.native import NativeEnv
+
+    native = NativeEnv(EnvConfig(), ranges=randomization.Ranges())
+    nominal = native.nominal
+    seen = []
+    for seed in range(3):
+        native.reset(seed=seed)
+        m = native.mj_model
+        seen.append((m.geom_friction[0, 0], m.body_subtreemass[native.robot.torso]))
+        assert 0.4 <= m.geom_friction[0, 0] <= 1.25
+        assert not np.allclose(m.dof_invweight0, nominal.dof_invweight0)  # recomputed for this variant
+        assert np.isfinite(native.step(np.zeros(18))[1])
+    assert len({round(f, 6) for f, _ in seen}) == 3 and len({round(s, 6) for _, s in seen}) == 3
