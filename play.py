@@ -143,7 +143,8 @@ def main(argv=None) -> int:
     s = player.summarize(episodes)
     print(f"summary: success {s['success_rate']:.0%}, falls {s['fall_rate']:.0%}, final distance "
           f"{s['final_distance_mean']:.2f} m, goals/episode {s['goals_per_episode']:.1f}, feet only "
-          f"{s['feet_only_share']:.1%} of steps; {sum(e['steps'] for e in episodes) / elapsed:,.0f} control steps/s "
+          f"{s['feet_only_share']:.1%} of steps, speed to the first goal "
+          f"{'-' if s['speed_to_first_goal'] is None else format(s['speed_to_first_goal'], '.3f')} m/s; {sum(e['steps'] for e in episodes) / elapsed:,.0f} control steps/s "
           f"with the policy (one core)")
     if args.json:
         player.write_json(Path(args.json), policy, env, episodes)

@@ -124,10 +124,13 @@ def summarize(episodes: list[dict]) -> dict:
         return float(np.mean([e[key] for e in episodes]))
 
     arrivals = [e["first_arrival_s"] for e in episodes if e["first_arrival_s"] is not None]
+    # Speed to the first goal: its start distance over the time to first enter the radius, m/s.
+    speeds = [e["first_goal_distance"] / e["first_arrival_s"] for e in episodes if e["first_arrival_s"]]
     return {"episodes": len(episodes), "success_rate": mean("success"), "fall_rate": mean("fell"),
             "nonfinite_rate": mean("nonfinite"), "final_distance_mean": mean("final_distance"),
             "goals_per_episode": mean("goals_reached"), "feet_only_share": mean("feet_only_share"),
-            "first_arrival_s_mean": float(np.mean(arrivals)) if arrivals else None}
+            "first_arrival_s_mean": float(np.mean(arrivals)) if arrivals else None,
+            "speed_to_first_goal": float(np.mean(speeds)) if speeds else None}
 
 
 def write_json(path: Path, policy: OnnxPolicy, env: NativeEnv, episodes: list[dict]) -> None:

@@ -218,3 +218,13 @@ def test_mjx_vector_env_resets_finished_episodes_in_the_same_step():
     assert not np.allclose(obs, info["final_obs"]) and not np.allclose(obs[:, :2], prev[:, :2])
     with pytest.raises(ValueError, match="num_envs"):
         gym_envs.MJXVectorEnv(num_envs=0)
+
+
+def test_leg_failure_sweep_covers_every_leg_and_opposite_pairs(tmp_path):
+    from hexa_mjx import leg_failure
+
+    out = tmp_path / "sweep.json"
+    assert leg_failure.main(["policies/goal.onnx", "--episodes", "1", "--out", str(out)]) == 0
+    rows = json.loads(out.read_text())
+    assert [r["failed_legs"] for r in rows] == [[], [1], [2], [3], [4], [5], [6], [1, 6], [2, 5], [3, 4]]
+    assert rows[0]["speed_share_of_intact"] == 1.0 and rows[0]["success_rate"] == 1.0
