@@ -223,16 +223,21 @@ def validate(cfg: TrainConfig) -> TrainConfig:
         raise ConfigError(f"--model {cfg.model} is not a file; convert a URDF with "
                           f"`python -m hexa_mjx.convert URDF -o {cfg.model}`")
     make_env_for(cfg)  # a bad ctrl_hz, task or reward raises here, before compiling
-    if run_dir.exists() and not run_dir.is_dir():
-        raise ConfigError(f"--run_dir {run_dir} is a file, not a folder; choose another --run_dir")
-    try:  # the run's folder, made only once every setting is known to be good
-        run_dir.mkdir(parents=True, exist_ok=True)
-        probe = run_dir / ".write-test"
+    writable_folder(run_dir, "--run_dir")  # made only once every setting is known to be good
+    return cfg
+
+
+def writable_folder(folder: Path, flag: str) -> None:
+    """Create `folder` and check that it can be written, or raise ConfigError naming `flag`."""
+    if folder.exists() and not folder.is_dir():
+        raise ConfigError(f"{flag} {folder} is a file, not a folder; choose another {flag}")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        probe = folder / ".write-test"
         probe.write_text("")
         probe.unlink()
     except OSError as e:
-        raise ConfigError(f"cannot write to --run_dir {run_dir} ({e.strerror or e}); choose another") from None
-    return cfg
+        raise ConfigError(f"cannot write to {flag} {folder} ({e.strerror or e}); choose another") from None
 
 
 def load_config(run_dir: Path) -> TrainConfig:

@@ -322,10 +322,4 @@ def plot_tracks(env, start, traj, out: Path, count: int = 8) -> Path:
 
 def check_writable(folder: Path) -> None:
     """Create `folder` or fail now, not after the rollout, with what to do."""
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-        probe = folder / ".write-test"
-        probe.write_text("")
-        probe.unlink()
-    except OSError as e:
-        raise ValueError(f"cannot write to {folder} ({e.strerror}); choose another --out") from None
+    config.writable_folder(folder, "--out")
