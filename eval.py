@@ -53,6 +53,10 @@ def main(argv=None) -> int:
                         help="'random': one random leg fails per episode (default: the run's)")
     parser.add_argument("--failure_mode", default=None, choices=["limp", "locked"],
                         help="a failed leg's servos give no torque (limp) or hold the start angles (locked)")
+    parser.add_argument("--push_speed", type=float, default=None, help="m/s, kicks to the torso (default: the run's)")
+    parser.add_argument("--push_interval", type=float, default=None, help="s between kicks (default: the run's)")
+    parser.add_argument("--action_latency", type=float, default=None, help="control steps of command delay, 0-1")
+    parser.add_argument("--obs_noise", type=float, default=None, help="observation noise level (1: Playground's)")
     parser.add_argument("--shadows", action="store_true",
                         help="render shadows and the skybox (5x slower without a GPU)")
     parser.add_argument("--no_compile_cache", dest="compile_cache", action="store_false",
@@ -73,7 +77,9 @@ def main(argv=None) -> int:
                                      goal_min_distance=args.goal_min_distance,
                                      goal_max_distance=args.goal_max_distance, episode_length=args.episode_length,
                                      disabled_legs=disabled, failure_mode=args.failure_mode,
-                                     leg_failure="none" if disabled else args.leg_failure)
+                                     leg_failure="none" if disabled else args.leg_failure,
+                                     push_speed=args.push_speed, push_interval=args.push_interval,
+                                     action_latency=args.action_latency, obs_noise=args.obs_noise)
     except (FileNotFoundError, RuntimeError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

@@ -40,6 +40,8 @@ def parse_args(argv=None) -> argparse.Namespace:
                    "masses, payload, servo gains and limits, damping, armature: hexa_mjx.randomization.Ranges)")
     p.add_argument("--push_speed", type=float, default=None, help="m/s, planar kicks to the torso (default: trained)")
     p.add_argument("--push_interval", type=float, default=None, help="s between kicks")
+    p.add_argument("--action_latency", type=float, default=None, help="control steps (0-1) of command delay")
+    p.add_argument("--obs_noise", type=float, default=None, help="observation noise level (1: Playground's)")
     p.add_argument("--disabled_legs", default="", help='legs whose servos fail, e.g. "3" or "1 4"')
     p.add_argument("--failure_mode", default=None, choices=["limp", "locked"], help="how a failed leg fails")
     p.add_argument("--benchmark", action="store_true", help="time the policy alone (one observation per call, "
@@ -96,7 +98,8 @@ def main(argv=None) -> int:
                          goal_min_distance=args.goal_min_distance, goal_max_distance=args.goal_max_distance,
                          start_joint_noise=args.start_joint_noise, start_yaw_noise=args.start_yaw_noise,
                          waypoints=waypoints_of(args.waypoints) or None, push_speed=args.push_speed,
-                         push_interval=args.push_interval, failure_mode=args.failure_mode)
+                         push_interval=args.push_interval, failure_mode=args.failure_mode,
+                         action_latency=args.action_latency, obs_noise=args.obs_noise)
         if args.disabled_legs:
             try:
                 overrides.update(disabled_legs=tuple(int(x) for x in args.disabled_legs.replace(",", " ").split()),

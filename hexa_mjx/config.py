@@ -91,6 +91,10 @@ class TrainConfig:
     push_speed: float = dataclasses.field(default=0.0, metadata={
         "help": "m/s, pushes: the torso's planar velocity is kicked by up to this every --push_interval (0: none)"})
     push_interval: float = dataclasses.field(default=3.0, metadata={"help": "s between pushes"})
+    action_latency: float = dataclasses.field(default=0.0, metadata={
+        "help": "control steps (0 to 1): each episode's commands arrive up to this late"})
+    obs_noise: float = dataclasses.field(default=0.0, metadata={
+        "help": "observation noise, a multiple of hexa_mjx.observations.NOISE_SCALES (1: Playground's levels)"})
     max_contact_points: int = dataclasses.field(default=0, metadata={
         "help": "MJX keeps only this many deepest robot-floor contacts per step (0: all 40 slots)"})
     num_eval_envs: int = dataclasses.field(default=32, metadata={
@@ -267,5 +271,6 @@ def make_env_for(cfg: TrainConfig, task: str = "", **overrides):
                     max_contact_points=cfg.max_contact_points, goal_min_distance=cfg.goal_min_distance,
                     goal_max_distance=cfg.goal_max_distance, goal_distance_cap=cfg.goal_max_distance,
                     leg_failure=cfg.leg_failure, leg_failure_rate=cfg.leg_failure_rate, failure_mode=cfg.failure_mode,
-                    push_speed=cfg.push_speed, push_interval=cfg.push_interval)
+                    push_speed=cfg.push_speed, push_interval=cfg.push_interval,
+                    action_latency=cfg.action_latency, obs_noise=cfg.obs_noise)
     return make_env(cfg.reward, cfg.task, **{**settings, **overrides})

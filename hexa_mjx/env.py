@@ -35,6 +35,7 @@ from hexa_mjx import rewards  # noqa: E402
 from hexa_mjx.env_config import EnvConfig, check_config  # noqa: E402
 from hexa_mjx.kinematics import fell as flipped, quat_mul  # noqa: E402
 from hexa_mjx.model import RobotModel, action_to_ctrl, failed_ctrl, servo_power  # noqa: E402
+from hexa_mjx.observations import noise_scale  # noqa: E402
 
 __all__ = ["EnvConfig", "HexapodEnv", "floor_contacts"]
 
@@ -49,6 +50,7 @@ class HexapodEnv(Env):
     """The robot on a floor with a goal marker; a task subclass adds goals, observation and terms."""
 
     name = ""  # the task's name in hexa_mjx.tasks.TASKS
+    observe_task = property(lambda self: self.name)  # the task whose observation `observe` computes
     rewards: tuple[str, ...] = ()  # the task's reward variants, its default first
 
     def __init__(self, config: EnvConfig = EnvConfig()):
@@ -107,8 +109,9 @@ class HexapodEnv(Env):
         metrics.update(distance=self.goal_distance(data), success=zero, fell=zero, nonfinite=zero, goal_bonus=zero,
                        goals_reached=zero, final_distance=zero, final_success=zero)
         info = {"rng": rng, "t": jp.zeros((), jp.int32), "success": zero, "goals": jp.zeros((), jp.int32),
-                "failed_legs": self.draw_failure(jax.random.fold_in(rng, 3))}
-        return State(data, self.observe(data), zero, zero, metrics, info)
+                "failed_legs": self.draw_failure(jax.random.fold_in(rng, 3)),
+                "latency": self.draw_latency(jax.random.fold_in(rng, 4))}
+        return State(data, self.noisy(self.observe(data), jax.random.fold_in(rng, 5)), zero, zero, metrics, info)
 
     def step(self, state: State, action: jax.Array) -> State:
         """Apply one control step: position targets from `action` in [-1, 1], `n_substeps` physics steps."""
@@ -121,18 +124,20 @@ class HexapodEnv(Env):
         if self.config.push_speed:  # a kick to the torso's planar velocity, every push_interval
             kick = self.push_kick(state.info["t"], jax.random.fold_in(state.info["rng"], 7))
             data = data.replace(qvel=data.qvel.at[:2].add(kick))
-        if self.leg_failures:  # failed servos, re-targeted at every physics step
-            failed = state.info["failed_legs"][self.robot.actuator_leg] > 0
+        failed = state.info["failed_legs"][self.robot.actuator_leg] > 0
+        delay = jp.round(state.info["latency"] * self.n_substeps)  # physics steps of the old command
 
-            def physics_step(d, _):
-                ctrl = failed_ctrl(target, d.qpos[self.robot.actuator_qpos], failed, self.config.failure_mode,
+        def physics_step(d, i):
+            ctrl = target
+            if self.config.action_latency:
+                ctrl = jp.where(i < delay, prev.ctrl, ctrl)
+            if self.leg_failures:  # failed servos, re-targeted at every physics step
+                ctrl = failed_ctrl(ctrl, d.qpos[self.robot.actuator_qpos], failed, self.config.failure_mode,
                                    self.robot.hold_ctrl)
-                return mjx.step(self.mjx_model, d.replace(ctrl=ctrl)), None
-        else:
-            def physics_step(d, _):
-                return mjx.step(self.mjx_model, d), None
-        data, _ = jax.lax.scan(physics_step, data, None, length=self.n_substeps)
-        data = data.replace(ctrl=target)  # the policy's own command, whatever failed
+            return mjx.step(self.mjx_model, d.replace(ctrl=ctrl)), None
+
+        data, _ = jax.lax.scan(physics_step, data, jp.arange(self.n_substeps))
+        data = data.replace(ctrl=target)  # the policy's own command, whatever failed or lagged
 
         # A diverged physics state never reaches the learner: keep the last finite one and end the episode.
         finite = jp.isfinite(data.qpos).all() & jp.isfinite(data.qvel).all()
@@ -159,7 +164,8 @@ class HexapodEnv(Env):
         success = jp.maximum(state.info["success"], reached.astype(jp.float32))
         info = {**state.info, "rng": rng, "t": jp.where(over, 0, t), "success": jp.where(over, 0.0, success),
                 "goals": jp.where(over, 0, goals),
-                "failed_legs": jp.where(over, self.draw_failure(jax.random.fold_in(key, 3)), state.info["failed_legs"])}
+                "failed_legs": jp.where(over, self.draw_failure(jax.random.fold_in(key, 3)), state.info["failed_legs"]),
+                "latency": jp.where(over, self.draw_latency(jax.random.fold_in(key, 4)), state.info["latency"])}
         # Start from the incoming metrics: wrappers (brax's evaluator) add keys of their own.
         metrics = {**state.metrics, **{f"reward/{name}": value for name, value in scaled.items()}}
         # Per-step values whose sums over an episode are the per-episode figures brax's evaluator reports.
@@ -168,8 +174,20 @@ class HexapodEnv(Env):
                        goal_bonus=rewards.VARIANTS["goal_directed"]["goal_bonus"] * rewards.goal_bonus(
                            dist, self.config.success_radius),
                        final_distance=jp.where(over, dist, 0.0), final_success=jp.where(over, success, 0.0))
-        return state.replace(pipeline_state=data, obs=self.observe(data), reward=reward,
+        return state.replace(pipeline_state=data, obs=self.noisy(self.observe(data), jax.random.fold_in(key, 5)),
+                             reward=reward,
                              done=done.astype(jp.float32), metrics=metrics, info=info)
+
+    def draw_latency(self, rng: jax.Array) -> jax.Array:
+        """An episode's action latency, control steps, uniform in [0, action_latency]."""
+        return jax.random.uniform(rng, maxval=self.config.action_latency)
+
+    def noisy(self, obs: jax.Array, rng: jax.Array) -> jax.Array:
+        """`obs` with the configured observation noise (none at obs_noise=0)."""
+        if not self.config.obs_noise:
+            return obs
+        scale = self.config.obs_noise * noise_scale(self.observe_task, self.action_size)
+        return obs + scale * jax.random.uniform(rng, obs.shape, minval=-1.0, maxval=1.0)
 
     def push_kick(self, t: jax.Array, rng: jax.Array) -> jax.Array:
         """The planar velocity kick (m/s) at episode step `t`: nonzero every `push_interval` s."""

@@ -63,6 +63,12 @@ class EnvConfig:
     # of a speed uniform in [0, push_speed] m/s (0: no pushes).
     push_speed: float = 0.0  # m/s
     push_interval: float = 3.0  # s
+    # Action latency: each episode's commands reach the servos this late, uniform in [0, action_latency]
+    # control steps (at most 1), in whole physics steps; until then the previous command holds.
+    action_latency: float = 0.0  # control steps
+    # Observation noise: uniform in +-obs_noise x hexa_mjx.observations.NOISE_SCALES on joint angles and
+    # velocities and the torso's velocities (0: none; 1: Playground's locomotion levels).
+    obs_noise: float = 0.0
 
 
 def check_config(config: EnvConfig) -> None:
@@ -88,6 +94,10 @@ def check_config(config: EnvConfig) -> None:
         raise ValueError(f"push_speed is a speed in m/s from 0 (no pushes) to 5, got {config.push_speed}")
     if not (math.isfinite(config.push_interval) and config.push_interval > 0):
         raise ValueError(f"push_interval must be a time above 0 s, got {config.push_interval}")
+    if not (math.isfinite(config.action_latency) and 0 <= config.action_latency <= 1):
+        raise ValueError(f"action_latency is in control steps from 0 to 1, got {config.action_latency}")
+    if not (math.isfinite(config.obs_noise) and 0 <= config.obs_noise <= 10):
+        raise ValueError(f"obs_noise is a multiple of the noise scales from 0 to 10, got {config.obs_noise}")
     if config.leg_failure not in ("none", "random"):
         raise ValueError(f"leg_failure is 'none' or 'random', got {config.leg_failure!r}")
     if config.failure_mode not in ("limp", "locked"):

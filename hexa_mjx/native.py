@@ -23,7 +23,7 @@ from hexa_mjx import randomization, rewards
 from hexa_mjx.env_config import EnvConfig, check_config
 from hexa_mjx.kinematics import fell, quat_mul
 from hexa_mjx.model import RobotModel, action_to_ctrl, failed_ctrl, servo_power
-from hexa_mjx.observations import TASKS, goal_observation, layout, navigate_observation
+from hexa_mjx.observations import TASKS, goal_observation, layout, navigate_observation, noise_scale
 
 
 class NativeEnv:
@@ -103,17 +103,22 @@ class NativeEnv:
         self.t = self.goals = 0
         self.success = False
         self.failed_legs = self._draw_failure()
+        self.latency = self.rng.uniform(0, self.config.action_latency)  # control steps
         self.set_goal(self._first_goal())
         mujoco.mj_forward(self.mj_model, data)
         return self.observe()
 
     def observe(self) -> np.ndarray:
+        """The policy's observation, with the configured noise."""
         d = self.data
         if self.observe_as == "goal":
             obs = goal_observation(d.qpos, d.qvel, self.goal)
         else:
             cap = self.config.goal_distance_cap or self.config.goal_max_distance
             obs = navigate_observation(d.qpos, d.qvel, d.ctrl, self.goal, self.robot.ctrl_lo, self.robot.ctrl_hi, cap)
+        if self.config.obs_noise:
+            scale = self.config.obs_noise * noise_scale(self.observe_as, self.mj_model.nu)
+            obs = obs + scale * self.rng.uniform(-1.0, 1.0, obs.shape)
         return obs.astype(np.float32)
 
     def step(self, action) -> tuple[np.ndarray, float, bool, bool, dict]:
@@ -131,10 +136,11 @@ class NativeEnv:
             angle, speed = self.rng.uniform(-np.pi, np.pi), self.rng.uniform(0, self.config.push_speed)
             data.qvel[:2] += speed * np.array([np.cos(angle), np.sin(angle)])
         failed = self.failed_legs[self.robot.actuator_leg] > 0
-        data.ctrl[:] = target
-        for _ in range(self.n_substeps):
+        delay, previous = round(self.latency * self.n_substeps), data.ctrl.copy()
+        for i in range(self.n_substeps):
+            data.ctrl[:] = previous if i < delay else target  # as HexapodEnv.step: latency, then failures
             if failed.any():  # failed servos, re-targeted at every physics step
-                data.ctrl[:] = failed_ctrl(target, data.qpos[self.robot.actuator_qpos], failed,
+                data.ctrl[:] = failed_ctrl(data.ctrl.copy(), data.qpos[self.robot.actuator_qpos], failed,
                                            self.config.failure_mode, self.robot.hold_ctrl)
             mujoco.mj_step(model, data)
         data.ctrl[:] = target  # the policy's own command, whatever failed

@@ -46,6 +46,21 @@ def navigate_observation(qpos, qvel, ctrl, goal_xy, ctrl_lo, ctrl_hi, distance_c
     ])
 
 
+# Half-widths of uniform observation noise at obs_noise=1, by what a slice holds (the levels of
+# MuJoCo Playground's locomotion tasks); other slices (goal, orientation, last action) stay exact.
+NOISE_SCALES = {"joint angles": 0.03, "joint velocities": 1.5, "linear velocity": 0.1, "angular velocity": 0.2}
+
+
+def noise_scale(task: str, joints: int) -> np.ndarray:
+    """Per-value half-width of observation noise at obs_noise=1 for `task`'s observation."""
+    out = np.zeros(layout(task, joints)[-1][1], np.float32)
+    for start, end, what, _ in layout(task, joints):
+        for key, scale in NOISE_SCALES.items():
+            if key in what:
+                out[start:end] = scale
+    return out
+
+
 def _layout(parts):
     """(start, end, what, units) of each (what, units, size) in order."""
     out, start = [], 0

@@ -133,3 +133,29 @@ def test_native_engine_draws_a_variant_every_episode():
         assert not np.allclose(m.dof_invweight0, nominal.dof_invweight0)  # recomputed for this variant
         assert np.isfinite(native.step(np.zeros(18))[1])
     assert len({round(f, 6) for f, _ in seen}) == 3 and len({round(s, 6) for _, s in seen}) == 3
+
+
+def test_a_late_command_leaves_the_previous_one_acting(env, step, state0):
+    """With a whole control step of latency the physics runs the previous command, and the env
+    still records the new one (the observation's last action)."""
+    late = hexa_mjx.make_env(action_latency=1.0)
+    lo, hi = env.mj_model.actuator_ctrlrange.T
+    previous = 2 * (np.asarray(state0.pipeline_state.ctrl) - lo) / (hi - lo) - 1  # the start's command
+    state = state0.replace(info={**state0.info, "latency": jp.float32(1.0)})
+    delayed = jax.jit(late.step)(state, jp.full(18, 0.7))
+    on_time = step(state0, jp.asarray(previous, jp.float32))
+    np.testing.assert_allclose(delayed.pipeline_state.qpos, on_time.pipeline_state.qpos, atol=1e-5)
+    np.testing.assert_allclose(delayed.pipeline_state.ctrl, lo + 0.85 * (hi - lo), atol=1e-5)
+    latencies = jax.vmap(late.draw_latency)(jax.random.split(jax.random.PRNGKey(0), 500))
+    assert 0 <= float(latencies.min()) and float(latencies.max()) <= 1 and float(latencies.std()) > 0.2
+
+
+def test_observation_noise_touches_only_sensor_values():
+    from hexa_mjx.observations import noise_scale
+
+    noisy = hexa_mjx.make_env(obs_noise=1.0)
+    state = jax.jit(noisy.reset)(jax.random.PRNGKey(0))
+    diff = np.asarray(state.obs - noisy.observe(state.pipeline_state))
+    scale = noise_scale("goal", 18)
+    assert np.all(np.abs(diff) <= scale + 1e-6) and np.all(diff[scale == 0] == 0)
+    assert np.abs(diff[31:49]).max() > 0.3  # joint velocities: +-1.5 rad/s

@@ -37,5 +37,5 @@ def make_env(reward: str = "", task: str = "goal", observe_as: str = "", **overr
     cls = task_class(task)
     if observe_as and observe_as != task:
         cls = type(f"{cls.__name__}Observed{task_class(observe_as).__name__}", (cls,),
-                   {"observe": task_class(observe_as).observe})
+                   {"observe": task_class(observe_as).observe, "observe_task": observe_as})
     return cls(EnvConfig(task=task, reward=reward, **overrides))
