@@ -192,6 +192,37 @@ def write_tables(table: list[dict], out: Path) -> tuple[Path, Path]:
     return csv_path, md_path
 
 
+def gait_table(out: Path) -> list[dict]:
+    """Per (study, condition), from each run's `eval/metrics.json` (python eval.py --ckpt RUN):
+    success, gait classes over seeds, path speed and cost of transport, mean and std over seeds."""
+    groups: dict[tuple, list[dict]] = {}
+    for path in sorted(Path(out).glob("*/*/eval/metrics.json")):
+        summary = json.loads(path.read_text())["summary"]
+        if "gait" in summary:
+            run_dir = path.parent.parent
+            groups.setdefault((run_dir.parent.name, run_dir.name.rpartition("-s")[0]), []).append(summary)
+    table = []
+    for (study, condition), runs in sorted(groups.items()):
+        row = {"study": study, "condition": condition, "seeds": len(runs),
+               "gait_classes": ", ".join(r["gait"]["class"] for r in runs)}
+        row["success_mean"], _ = _mean_std([r["success_rate"] for r in runs])
+        row["speed_mean"], row["speed_std"] = _mean_std([r["gait"].get("speed") for r in runs])
+        row["cot_mean"], row["cot_std"] = _mean_std([r["gait"].get("cost_of_transport_median") for r in runs])
+        table.append(row)
+    return table
+
+
+def write_gait_table(table: list[dict], out: Path) -> Path:
+    lines = ["| study | condition | seeds | success | gait class per seed | path speed (m/s) | cost of transport |",
+             "|---|---|---|---|---|---|---|"]
+    lines += [f"| {r['study']} | {r['condition']} | {r['seeds']} | {r['success_mean']:.0%} | {r['gait_classes']} | "
+              f"{r['speed_mean']:.3f} +- {r['speed_std']:.3f} | {r['cot_mean']:.2f} +- {r['cot_std']:.2f} |"
+              for r in table]
+    path = out / "gait.md"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
 def _curves(ax, runs, key, label_of):
     """Mean line and +-std band over seeds for each label."""
     by_label: dict[str, list[dict]] = {}
@@ -263,11 +294,14 @@ def plot_figures(runs: list[dict], out: Path) -> list[Path]:
 
 
 def aggregate(out: Path) -> list[Path]:
-    """Figures, CSV and markdown table from the run folders under `out`."""
+    """Figures, CSV and markdown tables from the run folders under `out` (gait.md from the runs
+    that eval.py has evaluated: `python eval.py --ckpt RUN` writes RUN/eval/metrics.json)."""
     runs = load_runs(out)
     if not runs:
         raise FileNotFoundError(f"no run folders with metrics.jsonl under {out}/<study>/")
-    return plot_figures(runs, Path(out)) + list(write_tables(final_table(runs), Path(out)))
+    written = plot_figures(runs, Path(out)) + list(write_tables(final_table(runs), Path(out)))
+    gaits = gait_table(Path(out))  # runs evaluated with eval.py (gait and cost of transport)
+    return written + ([write_gait_table(gaits, Path(out))] if gaits else [])
 
 
 def main(argv=None) -> int:

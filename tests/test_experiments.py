@@ -125,3 +125,14 @@ def test_energy_grid(tmp_path):
     assert runs[0].config.run_dir == str(tmp_path / "energy" / "goal_directed-s0")
     with pytest.raises(ValueError, match="compares rewards of the report's task"):
         experiments.grid("energy", tmp_path, task="navigate")
+
+
+def test_gait_table_from_evaluated_runs(tmp_path):
+    for condition, seed, cls, cot in (("energy", 0, "tripod", 2.0), ("energy", 1, "irregular", 4.0)):
+        path = tmp_path / "energy" / f"{condition}-s{seed}" / "eval" / "metrics.json"
+        path.parent.mkdir(parents=True)
+        path.write_text(json.dumps({"summary": {"success_rate": 1.0, "gait": {
+            "class": cls, "speed": 0.5, "cost_of_transport_median": cot}}}))
+    (row,) = experiments.gait_table(tmp_path)
+    assert (row["seeds"], row["gait_classes"], row["cot_mean"], row["cot_std"]) == (2, "tripod, irregular", 3.0, 1.0)
+    assert "| energy | energy | 2 | 100% | tripod, irregular |" in experiments.write_gait_table([row], tmp_path).read_text()
