@@ -44,6 +44,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--obs_noise", type=float, default=None, help="observation noise level (1: Playground's)")
     p.add_argument("--disabled_legs", default="", help='legs whose servos fail, e.g. "3" or "1 4"')
     p.add_argument("--failure_mode", default=None, choices=["limp", "locked"], help="how a failed leg fails")
+    p.add_argument("--solver", default="trained", choices=["trained", "default"],
+                   help="'trained': the model's fast solver setting (1 iteration); 'default': MuJoCo's default "
+                        "accuracy (100 iterations, 50 line-search), the sim-to-sim check")
     p.add_argument("--benchmark", action="store_true", help="time the policy alone (one observation per call, "
                    "one thread) and exit")
     args = p.parse_args(argv)
@@ -100,6 +103,8 @@ def main(argv=None) -> int:
                          waypoints=waypoints_of(args.waypoints) or None, push_speed=args.push_speed,
                          push_interval=args.push_interval, failure_mode=args.failure_mode,
                          action_latency=args.action_latency, obs_noise=args.obs_noise)
+        if args.solver == "default":
+            overrides.update(solver_iterations=100, ls_iterations=50)  # MuJoCo's defaults
         if args.disabled_legs:
             try:
                 overrides.update(disabled_legs=tuple(int(x) for x in args.disabled_legs.replace(",", " ").split()),
