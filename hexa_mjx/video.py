@@ -82,3 +82,55 @@ def draw_path(scene, corners: np.ndarray, width=0.01, height=0.003) -> None:
         mujoco.mjv_connector(geom, mujoco.mjtGeom.mjGEOM_CAPSULE, width, np.array([*a, height]),
                              np.array([*b, height]))
         scene.ngeom += 1
+
+
+def render_rates(model, qpos, frames: int = 60, repeats: int = 3, width: int = 640, height: int = 480) -> dict:
+    """Frames per second rendering `qpos` from the tracking camera, shadows and skybox off and on
+    (median of `repeats`), with the OpenGL backend MUJOCO_GL names."""
+    import statistics
+    import time
+
+    import mujoco
+
+    data = mujoco.MjData(model)
+    data.qpos[:] = qpos
+    mujoco.mj_forward(model, data)
+    renderer = mujoco.Renderer(model, height=height, width=width)
+    rates = {}
+    for shadows in (False, True):
+        runs = []
+        for _ in range(repeats):
+            start = time.perf_counter()
+            for _ in range(frames):
+                renderer.update_scene(data, camera=robot.TRACKING_CAMERA)
+                renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = shadows
+                renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = shadows
+                renderer.render()
+            runs.append(frames / (time.perf_counter() - start))
+        rates["shadows" if shadows else "plain"] = statistics.median(runs)
+    renderer.close()
+    return rates
+
+
+def main(argv=None) -> None:
+    """`python -m hexa_mjx.video --benchmark`: the renderer's frame rate on this machine."""
+    import argparse
+
+    from hexa_mjx.env_config import EnvConfig
+    from hexa_mjx.model import RobotModel
+
+    parser = argparse.ArgumentParser(prog="python -m hexa_mjx.video", description=main.__doc__)
+    parser.add_argument("--benchmark", action="store_true", help="time off-screen rendering")
+    parser.add_argument("--frames", type=int, default=60)
+    args = parser.parse_args(argv)
+    if not args.benchmark:
+        parser.error("nothing to do: pass --benchmark")
+    rm = RobotModel(EnvConfig())
+    rates = render_rates(rm.mj_model, rm.qpos0, args.frames)
+    print(f"MUJOCO_GL={os.environ.get('MUJOCO_GL', '')}: 640x480 frames/s, median of 3 runs of {args.frames}: "
+          f"{rates['plain']:.1f} without shadows and skybox (eval.py's default), {rates['shadows']:.1f} with them "
+          f"({rates['plain'] / rates['shadows']:.1f}x)")
+
+
+if __name__ == "__main__":
+    main()
