@@ -103,7 +103,7 @@ def gait_actions(steps: int, dt: float) -> np.ndarray:
 def c_rollout(env, model: mujoco.MjModel, actions: np.ndarray) -> np.ndarray:
     """qpos after each control step when MuJoCo C runs `actions` from the env's start state."""
     data = mujoco.MjData(model)
-    data.qpos[:], data.qvel[:] = np.asarray(env._qpos0), np.asarray(env._qvel0)
+    data.qpos[:], data.qvel[:] = env.qpos0, env.qvel0
     mujoco.mj_forward(model, data)
     lo, hi = model.actuator_ctrlrange.T
     out = []

@@ -48,10 +48,10 @@ def plot_runs(run_dirs: list[Path], out: Path, title: str = "") -> Path:
     axes.flat[0].legend(fontsize=8)
     if title:
         fig.suptitle(title)
-    return _save(fig, out)
+    return save_figure(fig, out)
 
 
-def _save(fig, out: Path) -> Path:
+def save_figure(fig, out: Path) -> Path:
     """Write `fig` to the PNG `out` (creating its folder) and free it."""
     import matplotlib.pyplot as plt
 
@@ -87,7 +87,7 @@ def plot_paths(tracks: list, out: Path, corners=None, goals: list | None = None,
     ax.legend(fontsize=8)
     if title:
         ax.set_title(title)
-    return _save(fig, out)
+    return save_figure(fig, out)
 
 
 def plot_contact_diagram(stance, dt: float, out: Path, legs: list[str], title: str = "") -> Path:
@@ -110,7 +110,7 @@ def plot_contact_diagram(stance, dt: float, out: Path, legs: list[str], title: s
     ax.set_xlabel("time (s); bars: foot on the floor")
     if title:
         ax.set_title(title, fontsize=10)
-    return _save(fig, out)
+    return save_figure(fig, out)
 
 
 def contact_sheet(video: Path, out: Path, count: int = 6, every: int = 40) -> Path:

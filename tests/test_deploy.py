@@ -228,3 +228,14 @@ def test_leg_failure_sweep_covers_every_leg_and_opposite_pairs(tmp_path):
     rows = json.loads(out.read_text())
     assert [r["failed_legs"] for r in rows] == [[], [1], [2], [3], [4], [5], [6], [1, 6], [2, 5], [3, 4]]
     assert rows[0]["speed_share_of_intact"] == 1.0 and rows[0]["success_rate"] == 1.0
+
+
+def test_robustness_sweep_changes_one_quantity(tmp_path):
+    from hexa_mjx import sweeps
+
+    rows = sweeps.sweep("policies/goal.onnx", "payload", [0.0, 3.0], episodes=1, episode_length=120)
+    assert [r["value"] for r in rows] == [0.0, 3.0] and all(r["episodes"] == 1 for r in rows)
+    assert sweeps.plot(rows, "payload", tmp_path / "p.png").stat().st_size > 1000
+    with pytest.raises(ValueError, match="unknown sweep"):
+        sweeps.sweep("policies/goal.onnx", "gravity", [1.0], episodes=1)
+    assert sweeps.main(["policies/goal.onnx", "--sweep", "friction", "--values", "-1", "--episodes", "1"]) == 2
