@@ -112,7 +112,7 @@ def test_runs_from_before_a_new_setting_resume(tmp_path):
     cfg = config.validate(config.TrainConfig(run_dir=str(tmp_path / "old")))
     old = dataclasses.asdict(cfg)
     del old["start_joint_noise"], old["start_yaw_noise"]
-    (tmp_path / "old" / "config.json").parent.mkdir()
+    (tmp_path / "old").mkdir(exist_ok=True)  # validate made the run's folder
     (tmp_path / "old" / "config.json").write_text(json.dumps(old))
     config.validate(dataclasses.replace(cfg, resume=True))
     with pytest.raises(config.ConfigError, match="holds a different run: start_yaw_noise=0.0"):
@@ -226,7 +226,7 @@ def test_train_rejects_bad_input(trained, tmp_path):
     assert proc.returncode == 2 and "invalid choice: 'legs'" in proc.stderr
     proc = run("train.py", *TINY, "--run_dir", str(run_dir), check=False)
     assert proc.returncode == 2 and "already holds a run; pass --resume" in proc.stderr
-    proc = run("train.py", *TINY, "--seed", "4", "--run_dir", str(run_dir), "--resume", check=False)
+    proc = run("train.py", *TINY, *NOISE, "--seed", "4", "--run_dir", str(run_dir), "--resume", check=False)
     assert proc.returncode == 2 and "holds a different run: seed=3" in proc.stderr
     proc = run("train.py", *TINY, "--cpu_devices", "3", "--run_dir", str(tmp_path / "b"), check=False)
     assert proc.returncode == 2 and "3 devices must divide --num_envs (8)" in proc.stderr
