@@ -34,6 +34,9 @@ def opposite_pairs(env) -> list[tuple[int, int]]:
 
 def sweep(policy_path: str, episodes: int, seed: int = 0, **overrides) -> list[dict]:
     """Summaries (hexa_mjx.player.summarize) of each condition, with its failed legs and speed ratio."""
+    from hexa_mjx.sweeps import CLEAN
+
+    overrides = {**CLEAN, **overrides}  # only the failed legs change, whatever the policy was trained with
     policy = player.OnnxPolicy(policy_path)
     env = player.env_for(policy, **overrides)
     conditions = [()] + [(leg,) for leg in range(1, len(env.robot.legs) + 1)] + opposite_pairs(env)

@@ -3,7 +3,7 @@
     python -m hexa_mjx.sweeps policies/goal.onnx --sweep push --values 0 0.5 1 1.5 2 --out push.png
 
 Each value runs the same seeded episodes (`hexa_mjx.player`) with one quantity changed and
-everything else nominal: `push` (m/s, a kick every 3 s), `latency` (control steps), `noise`
+everything else nominal (no pushes, latency or noise, whatever the policy was trained with): `push` (m/s, a kick every 3 s), `latency` (control steps), `noise`
 (observation noise level), `friction` (coefficient), `mass` (every link's mass scale) or
 `payload` (kg on the torso). It prints success and falls per value and plots them.
 """
@@ -20,6 +20,7 @@ from hexa_mjx import player, randomization
 
 NOMINAL = randomization.Ranges(friction=(1.0, 1.0), mass_scale=(1.0, 1.0), payload=(0.0, 0.0), kp_scale=(1.0, 1.0),
                                force_scale=(1.0, 1.0), damping_scale=(1.0, 1.0), armature_scale=(1.0, 1.0))
+CLEAN = {"push_speed": 0.0, "action_latency": 0.0, "obs_noise": 0.0, "leg_failure": "none"}  # no perturbation
 SWEEPS = {  # name: (units, how a value sets the environment)
     "push": ("m/s", lambda v: {"push_speed": v}),
     "latency": ("control steps", lambda v: {"action_latency": v}),
@@ -39,7 +40,7 @@ def sweep(policy_path: str, name: str, values: list[float], episodes: int, seed:
     for value in values:
         setting = SWEEPS[name][1](value)
         ranges = setting.pop("ranges", None)
-        env = player.env_for(policy, **overrides, **setting)
+        env = player.env_for(policy, **{**CLEAN, **overrides, **setting})
         if ranges is not None:
             ranges.check()
             env.ranges = ranges
