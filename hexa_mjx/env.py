@@ -32,7 +32,7 @@ with contextlib.redirect_stdout(io.StringIO()):
     from mujoco import mjx
 
 from hexa_mjx import rewards  # noqa: E402
-from hexa_mjx.env_config import EnvConfig, check_config  # noqa: E402
+from hexa_mjx.env_config import EnvConfig, check_config, push_steps  # noqa: E402
 from hexa_mjx.kinematics import fell as flipped, quat_mul  # noqa: E402
 from hexa_mjx.model import RobotModel, action_to_ctrl, failed_ctrl, servo_power  # noqa: E402
 from hexa_mjx.observations import noise_scale  # noqa: E402
@@ -175,8 +175,7 @@ class HexapodEnv(Env):
                            dist, self.config.success_radius),
                        final_distance=jp.where(over, dist, 0.0), final_success=jp.where(over, success, 0.0))
         return state.replace(pipeline_state=data, obs=self.noisy(self.observe(data), jax.random.fold_in(key, 5)),
-                             reward=reward,
-                             done=done.astype(jp.float32), metrics=metrics, info=info)
+                             reward=reward, done=done.astype(jp.float32), metrics=metrics, info=info)
 
     def draw_latency(self, rng: jax.Array) -> jax.Array:
         """An episode's action latency, control steps, uniform in [0, action_latency]."""
@@ -191,7 +190,7 @@ class HexapodEnv(Env):
 
     def push_kick(self, t: jax.Array, rng: jax.Array) -> jax.Array:
         """The planar velocity kick (m/s) at episode step `t`: nonzero every `push_interval` s."""
-        every = max(int(round(self.config.push_interval / self.dt)), 1)
+        every = push_steps(self.config, self.dt)
         k_angle, k_speed = jax.random.split(rng)
         angle = jax.random.uniform(k_angle, minval=-jp.pi, maxval=jp.pi)
         speed = jax.random.uniform(k_speed, maxval=self.config.push_speed)

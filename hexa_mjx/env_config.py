@@ -71,6 +71,26 @@ class EnvConfig:
     obs_noise: float = 0.0
 
 
+def make_config(task: str = "goal", reward: str = "", **overrides) -> EnvConfig:
+    """An EnvConfig from keyword settings, with a clear error for an unknown name; `ablate` may be
+    one name or several, `waypoints` any sequence of (x, y) pairs."""
+    fields = {f.name for f in dataclasses.fields(EnvConfig)}
+    unknown = sorted(set(overrides) - fields)
+    if unknown:
+        raise TypeError(f"unknown environment setting(s) {unknown}; valid names are {sorted(fields - {'reward', 'task'})}")
+    if "ablate" in overrides:
+        ablate = overrides["ablate"]
+        overrides["ablate"] = (ablate,) if isinstance(ablate, str) else tuple(ablate)
+    if "waypoints" in overrides:
+        overrides["waypoints"] = tuple(tuple(float(c) for c in p) for p in overrides["waypoints"])
+    return EnvConfig(task=task, reward=reward, **overrides)
+
+
+def push_steps(config: EnvConfig, dt: float) -> int:
+    """Control steps between pushes (`push_interval` at a control period of `dt` s)."""
+    return max(int(round(config.push_interval / dt)), 1)
+
+
 def check_config(config: EnvConfig) -> None:
     """Raise ValueError for settings out of range (before any model is built or compiled)."""
     for name in ("ctrl_hz", "success_radius", "goal_distance", "goal_max_distance", "target_height"):

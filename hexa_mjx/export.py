@@ -95,7 +95,7 @@ def deployment_metadata(env, cfg, step: int, source: str) -> dict:
         "observation_size": env.observation_size,
         "observation_layout": [dict(start=a, end=b, what=w, units=u) for a, b, w, u in layout(env.config.task, model.nu)],
         "action_size": env.action_size,
-        "joint_order": [model.joint(model.actuator_trnid[i, 0]).name for i in range(model.nu)],
+        "joint_order": env.robot.actuator_joints,
         "action_mapping": {
             "target_rad": "ctrl_lo + (clip(action, -1, 1) + 1) / 2 * (ctrl_hi - ctrl_lo)",
             "ctrl_lo": model.actuator_ctrlrange[:, 0].round(6).tolist(),

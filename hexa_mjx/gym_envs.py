@@ -14,29 +14,15 @@ terminated on a fall and truncated at `episode_length`; `info["terms"]` holds th
 
 from __future__ import annotations
 
-import dataclasses
-
 import gymnasium
 import numpy as np
 from gymnasium import spaces
 
 from hexa_mjx import robot
-from hexa_mjx.env_config import EnvConfig
+from hexa_mjx.env_config import make_config
 from hexa_mjx.native import NativeEnv
 
 IDS = {"goal": "hexa_mjx/HexapodGoal-v0", "navigate": "hexa_mjx/HexapodNavigate-v0"}
-
-
-def _config(task: str, overrides: dict) -> EnvConfig:
-    fields = {f.name for f in dataclasses.fields(EnvConfig)} - {"task"}
-    unknown = sorted(set(overrides) - fields)
-    if unknown:
-        raise TypeError(f"unknown environment setting(s) {unknown}; valid names are {sorted(fields)}")
-    if "waypoints" in overrides:
-        overrides["waypoints"] = tuple(tuple(float(c) for c in p) for p in overrides["waypoints"])
-    if "ablate" in overrides:
-        overrides["ablate"] = tuple(overrides["ablate"])
-    return EnvConfig(task=task, **overrides)
 
 
 class HexapodGymEnv(gymnasium.Env):
@@ -48,7 +34,7 @@ class HexapodGymEnv(gymnasium.Env):
                  **overrides):
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
-        self.env = NativeEnv(_config(task, dict(overrides)))
+        self.env = NativeEnv(make_config(task, **overrides))
         self.render_mode, self.size, self._renderer = render_mode, (height, width), None
         self.metadata = {**self.metadata, "render_fps": int(round(1.0 / self.env.dt))}
         self.observation_space = spaces.Box(-np.inf, np.inf, (self.env.observation_size,), np.float32)

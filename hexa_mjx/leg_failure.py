@@ -26,10 +26,10 @@ def opposite_pairs(env) -> list[tuple[int, int]]:
     data = mujoco.MjData(m)
     data.qpos[:] = robot.qpos0
     mujoco.mj_forward(m, data)
-    hips = [m.actuator_trnid[np.flatnonzero(robot.actuator_leg == i)[0], 0] for i in range(len(robot.legs))]
-    offsets = data.xanchor[hips, :2] - data.qpos[:2]
+    offsets = data.xanchor[robot.hips, :2] - data.qpos[:2]
     unit = offsets / np.linalg.norm(offsets, axis=1, keepdims=True)
-    return [(i + 1, j + 1) for i in range(len(hips)) for j in range(i + 1, len(hips)) if unit[i] @ unit[j] < -0.99]
+    legs = len(robot.hips)
+    return [(i + 1, j + 1) for i in range(legs) for j in range(i + 1, legs) if unit[i] @ unit[j] < -0.99]
 
 
 def sweep(policy_path: str, episodes: int, seed: int = 0, **overrides) -> list[dict]:

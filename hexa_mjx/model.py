@@ -75,6 +75,9 @@ class RobotModel:
         joints = model.actuator_trnid[:, 0]
         self.actuator_leg = body_leg[model.jnt_bodyid[joints]]  # leg index of each actuator
         self.actuator_qpos = model.jnt_qposadr[joints]  # each actuator's joint angle in qpos
+        self.actuator_dof = model.jnt_dofadr[joints]  # each actuator's joint velocity in qvel
+        self.actuator_joints = [model.joint(j).name for j in joints]  # the joint each actuator drives
+        self.hips = [int(joints[np.flatnonzero(self.actuator_leg == i)[0]]) for i in range(len(self.legs))]  # joint ids
         for leg in config.disabled_legs:
             if leg > len(self.legs):
                 raise ValueError(f"disabled_legs: leg {leg} does not exist; this robot has legs 1 to {len(self.legs)}")
@@ -84,7 +87,6 @@ class RobotModel:
         self.foot_radius = model.geom_size[self.feet, 0]  # m
         self.ctrl_lo, self.ctrl_hi = (np.asarray(x, np.float32) for x in model.actuator_ctrlrange.T)
         hinges = model.jnt_type == mujoco.mjtJoint.mjJNT_HINGE
-        self.joint_names = [model.joint(j).name for j in np.flatnonzero(hinges)]
         self.joint_lo, self.joint_hi = (np.asarray(x, np.float32) for x in model.jnt_range[hinges].T)
 
         # Settle the start pose once with MuJoCo C; every episode starts from that state.
@@ -95,9 +97,7 @@ class RobotModel:
         self.qpos0, self.qvel0, self.ctrl0 = (np.array(x) for x in (data.qpos, data.qvel, data.ctrl))
         self.mass = float(model.body_subtreemass[torso])  # kg, the whole robot
         # m, hip axis to foot centre in the standing pose, mean over legs (for the Froude number)
-        hips = [joints[np.flatnonzero(self.actuator_leg == i)[0]] for i in range(len(self.legs))]
-        self.leg_length = float(np.mean(np.linalg.norm(data.xanchor[hips] - data.geom_xpos[self.feet], axis=1)))
-        self.actuator_dof = model.jnt_dofadr[joints]  # each actuator's joint velocity in qvel
+        self.leg_length = float(np.mean(np.linalg.norm(data.xanchor[self.hips] - data.geom_xpos[self.feet], axis=1)))
         self.start_xy = self.qpos0[:2].copy()
         self.hold_ctrl = self.qpos0[self.actuator_qpos].astype(np.float32)  # a locked leg's targets, rad
 

@@ -20,7 +20,7 @@ import mujoco
 import numpy as np
 
 from hexa_mjx import randomization, rewards
-from hexa_mjx.env_config import EnvConfig, check_config
+from hexa_mjx.env_config import EnvConfig, check_config, push_steps
 from hexa_mjx.kinematics import fell, quat_mul
 from hexa_mjx.model import RobotModel, action_to_ctrl, failed_ctrl, servo_power
 from hexa_mjx.observations import TASKS, goal_observation, layout, navigate_observation, noise_scale
@@ -52,6 +52,7 @@ class NativeEnv:
         self.t = self.goals = 0
         self.success = False
         self.failed_legs = np.zeros(len(self.robot.legs))
+        self.noise = config.obs_noise * noise_scale(self.observe_as, self.mj_model.nu)  # per observed value
 
     @property
     def dt(self) -> float:
@@ -117,8 +118,7 @@ class NativeEnv:
             cap = self.config.goal_distance_cap or self.config.goal_max_distance
             obs = navigate_observation(d.qpos, d.qvel, d.ctrl, self.goal, self.robot.ctrl_lo, self.robot.ctrl_hi, cap)
         if self.config.obs_noise:
-            scale = self.config.obs_noise * noise_scale(self.observe_as, self.mj_model.nu)
-            obs = obs + scale * self.rng.uniform(-1.0, 1.0, obs.shape)
+            obs = obs + self.noise * self.rng.uniform(-1.0, 1.0, obs.shape)
         return obs.astype(np.float32)
 
     def step(self, action) -> tuple[np.ndarray, float, bool, bool, dict]:
@@ -131,7 +131,7 @@ class NativeEnv:
         model, data = self.mj_model, self.data
         prev_qpos, prev_qvel = data.qpos.copy(), data.qvel.copy()
         target = action_to_ctrl(np.nan_to_num(action), self.robot.ctrl_lo, self.robot.ctrl_hi)
-        every = max(int(round(self.config.push_interval / self.dt)), 1)
+        every = push_steps(self.config, self.dt)
         if self.config.push_speed and self.t > 0 and self.t % every == 0:  # as HexapodEnv.push_kick
             angle, speed = self.rng.uniform(-np.pi, np.pi), self.rng.uniform(0, self.config.push_speed)
             data.qvel[:2] += speed * np.array([np.cos(angle), np.sin(angle)])

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from hexa_mjx import randomization
-from hexa_mjx.env_config import EnvConfig
+from hexa_mjx.env_config import EnvConfig, make_config
 from hexa_mjx.export import FORMAT, METADATA_KEY
 from hexa_mjx.native import NativeEnv
 from hexa_mjx.observations import TASKS, layout
@@ -70,15 +70,12 @@ def env_for(policy: OnnxPolicy, model_path: str | Path | None = None, randomize:
         raise ValueError(f"the {task} task observes {size} values, the policy {policy.path} "
                          f"expects {meta['observation_size']}: it was exported for another task or version")
     settings = {**meta["env_config"], **{k: v for k, v in overrides.items() if v is not None}}
-    settings["ablate"] = tuple(settings.get("ablate", ()))
-    settings["waypoints"] = tuple(tuple(float(c) for c in p) for p in settings.get("waypoints", ()))
     if model_path is not None:
         settings["model_path"] = str(model_path)
-    known = {f.name for f in dataclasses.fields(EnvConfig)}
-    env = NativeEnv(EnvConfig(**{k: v for k, v in settings.items() if k in known}),
+    known = {f.name for f in dataclasses.fields(EnvConfig)}  # a newer export's extra settings are ignored
+    env = NativeEnv(make_config(**{k: v for k, v in settings.items() if k in known}),
                     ranges=randomization.Ranges() if randomize else None)
-    model = env.mj_model
-    joints = [model.joint(model.actuator_trnid[i, 0]).name for i in range(model.nu)]
+    joints = env.robot.actuator_joints
     if joints != meta["joint_order"]:
         raise ValueError(f"the model {env.config.model_path} drives joints {joints}, but the policy "
                          f"{policy.path} was trained on {meta['joint_order']}; pass the model it was trained on "

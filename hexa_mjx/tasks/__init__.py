@@ -6,9 +6,8 @@
 
 from __future__ import annotations
 
-import dataclasses
-
-from hexa_mjx.env import EnvConfig, HexapodEnv
+from hexa_mjx.env import HexapodEnv
+from hexa_mjx.env_config import make_config
 from hexa_mjx.tasks.goal import GoalEnv
 from hexa_mjx.tasks.navigate import NavigateEnv
 
@@ -25,17 +24,9 @@ def make_env(reward: str = "", task: str = "goal", observe_as: str = "", **overr
     """Build a task's environment; `reward` picks one of its reward variants ("": its own), keyword
     overrides set `EnvConfig` fields. `observe_as` names another task whose observation the policy
     sees, to run that task's policy on these goals (the report's policy on navigation goals)."""
-    fields = {f.name for f in dataclasses.fields(EnvConfig)}
-    unknown = sorted(set(overrides) - fields)
-    if unknown:
-        raise TypeError(f"unknown environment setting(s) {unknown}; valid names are {sorted(fields - {'reward', 'task'})}")
-    if "ablate" in overrides:
-        ablate = overrides["ablate"]
-        overrides["ablate"] = (ablate,) if isinstance(ablate, str) else tuple(ablate)
-    if "waypoints" in overrides:
-        overrides["waypoints"] = tuple(tuple(float(c) for c in p) for p in overrides["waypoints"])
+    config = make_config(task, reward, **overrides)
     cls = task_class(task)
     if observe_as and observe_as != task:
         cls = type(f"{cls.__name__}Observed{task_class(observe_as).__name__}", (cls,),
                    {"observe": task_class(observe_as).observe, "observe_task": observe_as})
-    return cls(EnvConfig(task=task, reward=reward, **overrides))
+    return cls(config)
