@@ -84,7 +84,7 @@ def test_tanh_policy_and_deeper_networks_export(env):
 def test_native_rewards_match_mjx_from_the_same_state(env, step, state0):
     """For the same action from the same state, the native engine's reward and terms equal MJX's:
     on most steps to float precision; on steps with a foot impact the engines' contact solutions
-    differ slightly (joint velocities by up to ~0.3 rad/s), so the reward is within 2% + 0.05."""
+    differ slightly, so the reward is within 2% + 0.05."""
     native = NativeEnv(env.config)
     native.reset(seed=0)
     state, gaps = state0, []
