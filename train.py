@@ -11,7 +11,7 @@ import signal
 import sys
 
 try:
-    from hexa_mjx import config, jax_setup, training
+    from hexa_mjx import config, distributed, jax_setup, training
 except ImportError as e:  # a missing package, or a MUJOCO_GL that MuJoCo cannot use
     print(f"error: {e}", file=sys.stderr)
     sys.exit(2)
@@ -27,9 +27,19 @@ def main(argv=None) -> int:
     cfg = config.parse_args(argv)
     jax_setup.prepare_jax(cfg.cpu_devices, cfg.compile_cache)  # before anything starts JAX
     try:
-        config.validate(cfg)
-    except (config.ConfigError, ValueError, TypeError) as e:
+        distributed.initialize(cfg.coordinator, cfg.num_processes, cfg.process_id, cfg.coordinator_timeout)
+    except distributed.DistributedError as e:
         print(f"error: {e}", file=sys.stderr)
+        return 2
+    error = ""
+    try:
+        config.validate(cfg, writes=distributed.is_main())
+    except (config.ConfigError, ValueError, TypeError) as e:
+        error = str(e)
+    # Every process of a multi-process run checks the others' settings, so all stop together.
+    error = distributed.agree(cfg, error, config.PER_PROCESS)
+    if error:
+        print(f"error: {error}", file=sys.stderr)
         return 2
     try:
         training.train(cfg)

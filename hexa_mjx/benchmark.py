@@ -165,8 +165,8 @@ def _without_contacts(env):
     model = copy.copy(env.mj_model)
     model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
     bare = copy.copy(env)
-    bare.mjx_model = mjx.put_model(model, impl="jax")
-    bare._data0 = mjx.make_data(bare.mjx_model, impl="jax")
+    bare.mjx_model = mjx.put_model(model, impl="jax", device=jax.local_devices()[0])
+    bare._data0 = mjx.make_data(bare.mjx_model, impl="jax", device=jax.local_devices()[0])
     return bare
 
 

@@ -8,12 +8,14 @@ finite; `load_latest` falls back to the newest checkpoint that passes, and says 
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import os
 import re
 import shutil
 import sys
+from collections.abc import Mapping
 from pathlib import Path
 
 import jax
@@ -51,14 +53,54 @@ def save_checkpoint(run_dir: Path, step: int, params) -> Path:
     root.mkdir(parents=True, exist_ok=True)
     final, tmp = root / f"{step:012d}", root / f"tmp-{step:012d}-{os.getpid()}"
     shutil.rmtree(tmp, ignore_errors=True)
-    checkpointer = ocp.StandardCheckpointer()
-    checkpointer.save(tmp.resolve() / "params", jax.device_get(params))
+    checkpointer = checkpointer_here()
+    checkpointer.save(tmp.resolve() / "params", host_tree(params))
     checkpointer.wait_until_finished()
     (tmp / "step.json").write_text(json.dumps({"step": step, "sha256": digest(tmp / "params")}))
     if final.exists():
         shutil.rmtree(final)
     tmp.rename(final)
     return final
+
+
+def checkpointer_here():
+    """An orbax checkpointer that acts for this process alone: in a multi-process run only process 0
+    saves and loads, so orbax must not wait for the others at its barriers."""
+    import orbax.checkpoint as ocp
+
+    me = jax.process_index()
+    return ocp.StandardCheckpointer(multiprocessing_options=ocp.options.MultiprocessingOptions(
+        primary_host=me, active_processes={me}))
+
+
+def host_tree(tree):
+    """`tree` with NumPy leaves and dataclasses as dicts (same names on disk). Orbax refuses device
+    arrays in a multi-process run, and brax's UInt64 step counter casts its parts back to device
+    arrays whenever it is rebuilt, so its fields must leave the dataclass."""
+    if isinstance(tree, (tuple, list)):
+        return type(tree)(host_tree(x) for x in tree)
+    if dataclasses.is_dataclass(tree):
+        return {f.name: host_tree(getattr(tree, f.name)) for f in tree_fields(tree)}
+    if isinstance(tree, Mapping):
+        return {k: host_tree(v) for k, v in tree.items()}
+    return np.asarray(tree)
+
+
+def tree_fields(obj) -> list:
+    """A flax dataclass's fields that are pytree nodes (static settings are not saved)."""
+    return [f for f in dataclasses.fields(obj) if f.metadata.get("pytree_node", True)]
+
+
+def like(template, plain):
+    """`plain` (as host_tree gives it) rebuilt in `template`'s containers."""
+    if isinstance(template, (tuple, list)):
+        return type(template)(like(t, p) for t, p in zip(template, plain, strict=True))
+    if dataclasses.is_dataclass(template):
+        return template.replace(**{f.name: like(getattr(template, f.name), plain[f.name])
+                                   for f in tree_fields(template)})
+    if isinstance(template, Mapping):
+        return type(template)({k: like(v, plain[k]) for k, v in template.items()})
+    return plain
 
 
 def digest(folder: Path) -> str:
@@ -80,7 +122,7 @@ def load_checkpoint(path: Path, template):
         meta = json.loads((path / "step.json").read_text())
         if "sha256" in meta and digest(path / "params") != meta["sha256"]:
             raise ValueError("its files do not match the checksum written with them (changed or damaged on disk)")
-        params = ocp.StandardCheckpointer().restore((path / "params").resolve(), template)
+        params = like(template, checkpointer_here().restore((path / "params").resolve(), host_tree(template)))
     except Exception as e:  # orbax raises many kinds; all mean the same to a user
         raise RuntimeError(f"checkpoint {path} is unreadable ({type(e).__name__}: {str(e)[:200]}); "
                            f"use an earlier checkpoint in {path.parent}") from e

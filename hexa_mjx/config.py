@@ -14,7 +14,7 @@ from typing import Any
 
 import jax
 
-from hexa_mjx import rewards
+from hexa_mjx import distributed, rewards
 from hexa_mjx.jax_setup import devices_for
 from hexa_mjx.tasks import TASKS, make_env, task_class
 
@@ -107,6 +107,15 @@ class TrainConfig:
     cpu_devices: int = dataclasses.field(default=0, metadata={
         "help": "on the CPU: XLA host devices that split environments and minibatches, one core each "
                 "(0: one per core, as many as divide num_envs and batch_size; 1: a single device)"})
+    coordinator: str = dataclasses.field(default="", metadata={
+        "help": "multi-process training: HOST:PORT where process 0 serves jax.distributed's coordinator (empty: "
+                "one process, or the job SLURM / Open MPI started)"})
+    num_processes: int = dataclasses.field(default=1, metadata={
+        "help": "multi-process training: processes in the run, each with its own --process_id"})
+    process_id: int = dataclasses.field(default=0, metadata={
+        "help": "multi-process training: this process's index; 0 evaluates and writes the run directory"})
+    coordinator_timeout: float = dataclasses.field(default=120.0, metadata={
+        "help": "multi-process training: s to wait for the coordinator and for every process to join"})
 
     @property
     def steps_per_update(self) -> int:
@@ -125,7 +134,10 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 
 # Settings that may change on --resume without making it a different run.
-RESUMABLE = {"num_timesteps", "num_evals", "resume", "run_dir", "cpu_devices", "compile_cache", "progress"}
+RESUMABLE = {"num_timesteps", "num_evals", "resume", "run_dir", "cpu_devices", "compile_cache", "progress",
+             "coordinator", "num_processes", "process_id", "coordinator_timeout"}
+# Settings that may differ between the processes of one multi-process run.
+PER_PROCESS = {"process_id", "compile_cache", "progress"}
 
 
 class ConfigError(ValueError):
@@ -182,11 +194,13 @@ def check_ranges(cfg: TrainConfig) -> None:
         raise ConfigError(f"--hidden sizes must each be at least 1, got {cfg.hidden}")
 
 
-def validate(cfg: TrainConfig) -> TrainConfig:
-    """Fail fast, before any compile, on settings that cannot work; returns cfg with reward and run_dir set."""
+def validate(cfg: TrainConfig, writes: bool = True) -> TrainConfig:
+    """Fail fast, before any compile, on settings that cannot work; returns cfg with reward and run_dir set.
+    With `writes` (process 0 of a multi-process run, or the only one) also checks the run directory."""
     cfg = dataclasses.replace(cfg, reward=cfg.reward or task_class(cfg.task).rewards[0])
     rewards.make_scales(cfg.reward, cfg.ablate)  # unknown names raise ValueError
     check_ranges(cfg)
+    distributed.check(cfg.coordinator, cfg.num_processes, cfg.process_id, cfg.coordinator_timeout)
     trajectories = cfg.batch_size * cfg.num_minibatches
     if cfg.num_envs < 1 or trajectories % cfg.num_envs:
         fits = [n for n in (8, 16, 32, 64, 128, 256, 512, 1024, 2048, 4096) if trajectories % n == 0]
@@ -201,14 +215,27 @@ def validate(cfg: TrainConfig) -> TrainConfig:
         raise ConfigError(f"--cpu_devices {devices} but JAX has {jax.local_device_count()} CPU devices: it had "
                           "started before train() could ask for more; use train.py, or call "
                           "hexa_mjx.jax_setup.prepare_jax() before anything else touches JAX")
+    devices *= jax.process_count()  # brax splits both over every device of every process
     if cfg.num_envs % devices or cfg.batch_size % devices:
-        raise ConfigError(f"{devices} devices must divide --num_envs ({cfg.num_envs}) and --batch_size "
+        where = f" ({jax.process_count()} processes)" if jax.process_count() > 1 else ""
+        raise ConfigError(f"{devices} devices{where} must divide --num_envs ({cfg.num_envs}) and --batch_size "
                           f"({cfg.batch_size}); change them or --cpu_devices")
     for name in ("num_timesteps", "num_evals", "unroll_length", "update_epochs", "episode_length", "num_eval_envs"):
         if getattr(cfg, name) < 1:
             raise ConfigError(f"--{name} must be at least 1, got {getattr(cfg, name)}")
     run_dir = Path(cfg.run_dir) if cfg.run_dir else default_run_dir(cfg)
     cfg = dataclasses.replace(cfg, run_dir=str(run_dir))
+    if cfg.model and not Path(cfg.model).is_file():
+        raise ConfigError(f"--model {cfg.model} is not a file; convert a URDF with "
+                          f"`python -m hexa_mjx.convert URDF -o {cfg.model}`")
+    make_env_for(cfg)  # a bad ctrl_hz, task or reward raises here, before compiling
+    if writes:
+        check_run_dir(cfg, run_dir)
+    return cfg
+
+
+def check_run_dir(cfg: TrainConfig, run_dir: Path) -> None:
+    """ConfigError unless `run_dir` is new, or holds this run and --resume is given; creates it."""
     saved = run_dir / "config.json"
     if saved.is_file():
         if not cfg.resume:
@@ -223,12 +250,7 @@ def validate(cfg: TrainConfig) -> TrainConfig:
                               f" there; resume with the same settings or choose another --run_dir")
     elif cfg.resume and run_dir.exists() and any(run_dir.iterdir()):
         raise ConfigError(f"{run_dir} has no config.json, so it is not a run this tool can resume")
-    if cfg.model and not Path(cfg.model).is_file():
-        raise ConfigError(f"--model {cfg.model} is not a file; convert a URDF with "
-                          f"`python -m hexa_mjx.convert URDF -o {cfg.model}`")
-    make_env_for(cfg)  # a bad ctrl_hz, task or reward raises here, before compiling
     writable_folder(run_dir, "--run_dir")  # made only once every setting is known to be good
-    return cfg
 
 
 def writable_folder(folder: Path, flag: str) -> None:

@@ -69,8 +69,10 @@ class HexapodEnv(Env):
         self._qpos0, self._qvel0, self._ctrl0 = (jp.asarray(x, jp.float32) for x in
                                                  (self.robot.qpos0, self.robot.qvel0, self.robot.ctrl0))
         self._start_xy = jp.asarray(self.robot.start_xy, jp.float32)
-        self.mjx_model = mjx.put_model(self.mj_model, impl="jax")
-        self._data0 = mjx.make_data(self.mjx_model, impl="jax")
+        # MJX's default device is jax.devices()[0], which only process 0 of a multi-process run can address.
+        device = jax.local_devices()[0]
+        self.mjx_model = mjx.put_model(self.mj_model, impl="jax", device=device)
+        self._data0 = mjx.make_data(self.mjx_model, impl="jax", device=device)
 
     # -- brax Env interface -------------------------------------------------
 

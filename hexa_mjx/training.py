@@ -18,7 +18,7 @@ import jax
 import jax.numpy as jp
 from flax import linen
 
-from hexa_mjx import randomization
+from hexa_mjx import distributed, randomization
 from hexa_mjx.checkpoints import checkpoint_dir, list_checkpoints, load_latest, remove_temporaries, save_checkpoint
 from hexa_mjx.config import TrainConfig, make_env_for, validate
 from hexa_mjx.jax_setup import devices_for, prepare_jax
@@ -91,56 +91,72 @@ def wrap_env_fn(env, randomized: bool = False):
     return wrappers.wrap_for_training if env.fresh_starts or randomized else None
 
 
+def resume_point(cfg: TrainConfig, run_dir: Path, template) -> tuple[int, object]:
+    """(step, params) to continue from: (0, None) for a new run, or one with no readable checkpoint."""
+    if remove_temporaries(run_dir):
+        print(f"removed half-written checkpoint folders in {checkpoint_dir(run_dir)}")
+    if not cfg.resume:
+        return 0, None
+    if not list_checkpoints(run_dir):
+        print(f"{run_dir} has no complete checkpoint yet (it stopped before its first): starting again from step 0")
+        return 0, None
+    start_step, restore = load_latest(run_dir, template)
+    if restore is None:
+        print(f"{run_dir} has no readable checkpoint: starting again from step 0")
+    else:
+        print(f"resuming {run_dir} from step {start_step:,}")
+    return start_step, restore
+
+
 def train(cfg: TrainConfig) -> dict:
     """Run (or resume) PPO for `cfg`; returns the last evaluation row."""
     from brax.training.agents.ppo import train as ppo
 
     prepare_jax(cpu_devices=cfg.cpu_devices, compile_cache=cfg.compile_cache)
-    cfg = validate(cfg)
+    main = distributed.is_main()  # process 0 (or the only one) reads and writes the run directory
+    cfg = validate(cfg, writes=main)
     run_dir = Path(cfg.run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
     env = make_env_for(cfg)
-
-    start_step, restore = 0, None
-    if remove_temporaries(run_dir):
-        print(f"removed half-written checkpoint folders in {checkpoint_dir(run_dir)}")
-    if cfg.resume and list_checkpoints(run_dir):
-        start_step, restore = load_latest(run_dir, init_params(cfg, env))
-        if restore is None:
-            print(f"{run_dir} has no readable checkpoint: starting again from step 0")
-        else:
-            print(f"resuming {run_dir} from step {start_step:,}")
-    elif cfg.resume:
-        print(f"{run_dir} has no complete checkpoint yet (it stopped before its first): starting again from step 0")
-    # One row per evaluation: rows past the checkpoint go, and the checkpoint's own evaluation is
-    # logged again only if a crash came between saving it and writing its row.
-    logged = keep_rows_up_to(run_dir, start_step)
-    tmp = run_dir / "config.json.tmp"
-    tmp.write_text(json.dumps(dataclasses.asdict(cfg), indent=2))
-    tmp.replace(run_dir / "config.json")
+    template = init_params(cfg, env)
+    start_step, restore, logged = 0, None, set()
+    if main:
+        start_step, restore = resume_point(cfg, run_dir, template)
+        # One row per evaluation: rows past the checkpoint go, and the checkpoint's own evaluation is
+        # logged again only if a crash came between saving it and writing its row.
+        logged = keep_rows_up_to(run_dir, start_step)
+        tmp = run_dir / "config.json.tmp"
+        tmp.write_text(json.dumps(dataclasses.asdict(cfg), indent=2))
+        tmp.replace(run_dir / "config.json")
+    start_step, restored = (int(x) for x in distributed.share(jp.array([start_step, restore is not None])))
+    if restored:
+        restore = distributed.share(restore if main else template)
     remaining = cfg.num_timesteps - start_step
     if remaining <= 0:
         print(f"{run_dir} already has {start_step:,} of {cfg.num_timesteps:,} steps; nothing to do")
         return {}
 
-    logger = Logger(run_dir, cfg, start_step)
+    logger = Logger(run_dir, cfg, start_step) if main else None
 
     def on_progress(step, metrics):
+        if logger is None:  # brax reports on process 0 only; kept safe for other callers
+            return
         if "eval/episode_reward" not in metrics:  # a training batch (brax's log_training_metrics)
             logger.progress(start_step + step, metrics)
         elif step > 0 or start_step not in logged:  # brax evaluates the restored params at its step 0
             logger(start_step + step, metrics)
 
     def on_params(step, make_policy, params):
-        if step > 0:
+        if step > 0 and main:
             save_checkpoint(run_dir, start_step + step, params)
 
     t0 = time.time()
     devices = devices_for(cfg)
+    processes = f" x {jax.process_count()} processes" if jax.process_count() > 1 else ""
     print(f"training {cfg.task}: {cfg.reward} (ablate {cfg.ablate or 'none'}) seed {cfg.seed}: {remaining:,} steps on "
-          f"{cfg.num_envs} envs ({devices} {jax.default_backend()} device{'s' * (devices > 1)}), "
+          f"{cfg.num_envs} envs ({devices} {jax.default_backend()} device{'s' * (devices > 1)}{processes}), "
           f"{cfg.steps_per_update:,} steps per update -> {run_dir}", flush=True)
-    logger.compiling()
+    if logger:
+        logger.compiling()
     randomization_fn = randomization.randomization_fn(env) if cfg.randomize else None
     ppo.train(environment=env, num_timesteps=remaining, **ppo_settings(cfg), seed=cfg.seed + start_step,
               max_devices_per_host=devices, wrap_env_fn=wrap_env_fn(env, cfg.randomize),
@@ -148,8 +164,11 @@ def train(cfg: TrainConfig) -> dict:
               num_evals=evals_for(cfg, remaining), num_eval_envs=cfg.num_eval_envs, deterministic_eval=True,
               progress_fn=on_progress, policy_params_fn=on_params, restore_params=restore,
               log_training_metrics=cfg.progress, training_metrics_steps=cfg.steps_per_update)
-    logger.close()
     total = time.time() - t0
+    if logger is None:
+        print(f"process {jax.process_index()} done: {remaining:,} steps in {total / 60:.1f} min")
+        return {}
+    logger.close()
     last = logger.last
     print(f"done: {cfg.num_timesteps:,} steps in {total / 60:.1f} min; last evaluation: "
           f"success {last.get('success_rate', math.nan):.0%}, distance {last.get('final_distance', math.nan):.2f} m, "
