@@ -47,8 +47,6 @@ def remove_temporaries(run_dir: Path) -> int:
 
 def save_checkpoint(run_dir: Path, step: int, params) -> Path:
     """Write params for `step` atomically: into a temporary folder, renamed when complete."""
-    import orbax.checkpoint as ocp
-
     root = checkpoint_dir(run_dir)
     root.mkdir(parents=True, exist_ok=True)
     final, tmp = root / f"{step:012d}", root / f"tmp-{step:012d}-{os.getpid()}"
@@ -115,8 +113,6 @@ def load_checkpoint(path: Path, template):
     """Restore (normalizer, policy, value) params saved by save_checkpoint into `template`'s
     structure, after checking the files' digest (checkpoints older than digests skip that); every
     value must be finite. RuntimeError says what is wrong."""
-    import orbax.checkpoint as ocp
-
     path = Path(path)
     try:
         meta = json.loads((path / "step.json").read_text())

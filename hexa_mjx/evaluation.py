@@ -14,7 +14,7 @@ import numpy as np
 
 from hexa_mjx import checkpoints, config, gait, nav_metrics, plots, robot, training
 from hexa_mjx.model import servo_power
-from hexa_mjx.video import VIDEO_FPS, render_video
+from hexa_mjx.video import render_video
 
 
 CONTACT_GROUPS = ("torso", "hip and knee links", "shins", "feet")

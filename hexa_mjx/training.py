@@ -108,8 +108,9 @@ def resume_point(cfg: TrainConfig, run_dir: Path, template) -> tuple[int, object
     return start_step, restore
 
 
-def train(cfg: TrainConfig) -> dict:
-    """Run (or resume) PPO for `cfg`; returns the last evaluation row."""
+def train(cfg: TrainConfig, on_eval=None) -> dict:
+    """Run (or resume) PPO for `cfg`; returns the last evaluation row. `on_eval(row)` is called with
+    each evaluation's metrics.jsonl row (a sweep reports them to its scheduler)."""
     from brax.training.agents.ppo import train as ppo
 
     prepare_jax(cpu_devices=cfg.cpu_devices, compile_cache=cfg.compile_cache)
@@ -144,6 +145,8 @@ def train(cfg: TrainConfig) -> dict:
             logger.progress(start_step + step, metrics)
         elif step > 0 or start_step not in logged:  # brax evaluates the restored params at its step 0
             logger(start_step + step, metrics)
+            if on_eval:
+                on_eval(logger.last)
 
     def on_params(step, make_policy, params):
         if step > 0 and main:

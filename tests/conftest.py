@@ -1,5 +1,7 @@
 """Session fixtures: every jitted function is compiled once for the whole suite."""
 
+import os
+
 import jax
 import pytest
 
@@ -34,3 +36,9 @@ def nav_step(nav_env):
 @pytest.fixture(scope="session")
 def nav_reset(nav_env):
     return jax.jit(jax.vmap(nav_env.reset))
+
+
+@pytest.fixture(scope="session")
+def cache_env(tmp_path_factory):
+    """Subprocess environment sharing one fresh XLA compilation cache (later runs reuse compiles)."""
+    return {**os.environ, "JAX_COMPILATION_CACHE_DIR": str(tmp_path_factory.mktemp("xla_cache"))}

@@ -7,7 +7,7 @@ import json
 import matplotlib.image as mpimg
 import pytest
 
-from hexa_mjx import experiments
+from hexa_mjx import experiments, study_results
 
 
 def test_grids_match_the_report(tmp_path):
@@ -84,7 +84,7 @@ def test_aggregation_writes_figures_and_the_right_table(tmp_path):
                   {"final_distance": 3.0, "success_rate": 0.0, "episode_return": 50.0, "goal_bonus": 0.0})
     write_run(tmp_path, "lr", "lr_0.001", 0, {"final_distance": 0.9, "success_rate": 0.25, "episode_return": 7.0,
                                               "goal_bonus": 1.0})
-    paths = experiments.aggregate(tmp_path)
+    paths = study_results.aggregate(tmp_path)
     names = {p.name for p in paths}
     assert {"fig1_main.png", "fig2_seeds.png", "fig3_lr.png", "results.csv", "results.md"} <= names
     assert "fig4_ablation.png" not in names  # no ablation runs, no figure
@@ -103,7 +103,7 @@ def test_aggregation_writes_figures_and_the_right_table(tmp_path):
 
 def test_aggregate_without_runs_is_a_clear_error(tmp_path):
     with pytest.raises(FileNotFoundError, match="no run folders"):
-        experiments.aggregate(tmp_path)
+        study_results.aggregate(tmp_path)
 
 
 def test_navigation_grids(tmp_path):
@@ -133,6 +133,6 @@ def test_gait_table_from_evaluated_runs(tmp_path):
         path.parent.mkdir(parents=True)
         path.write_text(json.dumps({"summary": {"success_rate": 1.0, "gait": {
             "class": cls, "speed": 0.5, "cost_of_transport_median": cot}}}))
-    (row,) = experiments.gait_table(tmp_path)
+    (row,) = study_results.gait_table(tmp_path)
     assert (row["seeds"], row["gait_classes"], row["cot_mean"], row["cot_std"]) == (2, "tripod, irregular", 3.0, 1.0)
-    assert "| energy | energy | 2 | 100% | tripod, irregular |" in experiments.write_gait_table([row], tmp_path).read_text()
+    assert "| energy | energy | 2 | 100% | tripod, irregular |" in study_results.write_gait_table([row], tmp_path).read_text()

@@ -8,7 +8,7 @@ import pytest
 
 import hexa_mjx
 from hexa_mjx import randomization, wrappers
-from hexa_mjx.benchmark import c_rollout, gait_actions
+from hexa_mjx.benchmark import gait_actions
 
 N = 64
 

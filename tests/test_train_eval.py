@@ -28,12 +28,6 @@ NOISE = ["--start_joint_noise", "0.05", "--start_yaw_noise", "0.1", "--progress"
          "--push_speed", "0.3", "--push_interval", "0.1"]
 
 
-@pytest.fixture(scope="session")
-def cache_env(tmp_path_factory):
-    """Subprocess environment sharing one fresh XLA compilation cache (later runs reuse compiles)."""
-    return {**os.environ, "JAX_COMPILATION_CACHE_DIR": str(tmp_path_factory.mktemp("xla_cache"))}
-
-
 def run(script, *args, env=None, check=True):
     proc = subprocess.run([sys.executable, str(ROOT / script), *args], capture_output=True, text=True,
                           cwd=ROOT, env=env, timeout=900)

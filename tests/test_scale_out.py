@@ -1,0 +1,156 @@
+"""Multi-process training (jax.distributed, 2 local processes) and study grids and sweeps on Ray."""
+
+import dataclasses
+import json
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from hexa_mjx import config, experiments, ray_runs, study_results
+
+ROOT = Path(__file__).resolve().parent.parent
+# 8 envs split over 2 processes of 1 CPU device each; 64 env steps per update; tiny networks.
+TINY = ["--num_envs", "8", "--batch_size", "8", "--num_minibatches", "2", "--unroll_length", "4",
+        "--num_evals", "2", "--num_eval_envs", "2", "--episode_length", "20", "--hidden", "16", "16",
+        "--update_epochs", "1", "--cpu_devices", "1"]
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("", 0))
+        return s.getsockname()[1]
+
+
+def train_processes(args_per_process, env, timeout=600):
+    """Start one train.py per argument list; returns their (returncode, stdout, stderr)."""
+    procs = [subprocess.Popen([sys.executable, str(ROOT / "train.py"), *args], cwd=ROOT, env=env, text=True,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE) for args in args_per_process]
+    return [(p.returncode, *p.communicate(timeout=timeout)) for p in procs]
+
+
+def distributed(port, n=2):
+    return [["--coordinator", f"localhost:{port}", "--num_processes", str(n), "--process_id", str(i),
+             "--coordinator_timeout", "60"] for i in range(n)]
+
+
+def rows(run_dir):
+    return [json.loads(line) for line in (run_dir / "metrics.jsonl").read_text().splitlines()]
+
+
+def test_two_processes_train_to_the_end_and_resume(tmp_path, cache_env):
+    run_dir = tmp_path / "mp"
+    results = train_processes([[*TINY, "--num_timesteps", "64", "--run_dir", str(run_dir), *d]
+                               for d in distributed(free_port())], cache_env)
+    assert [r[0] for r in results] == [0, 0], results
+    assert "x 2 processes" in results[0][1] and "process 1 done" in results[1][1]
+    assert [r["step"] for r in rows(run_dir)] == [0, 64]  # process 0 alone writes, each row once
+    assert sorted(p.name for p in (run_dir / "checkpoints").iterdir()) == [f"{64:012d}"]
+    results = train_processes([[*TINY, "--num_timesteps", "128", "--run_dir", str(run_dir), "--resume", *d]
+                               for d in distributed(free_port())], cache_env)
+    assert [r[0] for r in results] == [0, 0], results
+    assert "resuming" in results[0][1]
+    assert [r["step"] for r in rows(run_dir)] == [0, 64, 128]
+
+
+def test_processes_with_different_settings_stop_together(tmp_path, cache_env):
+    port = free_port()
+    args = [[*TINY, "--seed", str(i), "--run_dir", str(tmp_path / "r"), *d] for i, d in enumerate(distributed(port))]
+    for code, out, err in train_processes(args, cache_env, timeout=120):
+        assert code == 2 and "error: the processes were started with different settings (--seed)" in err, err
+    assert not (tmp_path / "r" / "config.json").exists()
+
+
+@pytest.mark.parametrize("flags, message", [
+    (["--num_processes", "2", "--process_id", "2", "--coordinator", "localhost:1234"], "--process_id must be in 0..1"),
+    (["--num_processes", "2", "--process_id", "1"], "needs --coordinator HOST:PORT"),
+    (["--num_processes", "2", "--coordinator", "nohost"], "--coordinator must be HOST:PORT"),
+    (["--num_processes", "0"], "--num_processes must be at least 1"),
+])
+def test_bad_process_flags_are_one_line(tmp_path, flags, message):
+    proc = subprocess.run([sys.executable, str(ROOT / "train.py"), "--run_dir", str(tmp_path / "r"), *flags],
+                          capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert proc.returncode == 2 and proc.stderr.strip().splitlines() == [f"error: {proc.stderr.split('error: ')[1].strip()}"]
+    assert message in proc.stderr and not (tmp_path / "r").exists()
+
+
+def test_an_unreachable_coordinator_fails_within_its_timeout(tmp_path):
+    t0 = time.time()
+    proc = subprocess.run([sys.executable, str(ROOT / "train.py"), "--run_dir", str(tmp_path / "r"),
+                           "--coordinator", f"localhost:{free_port()}", "--num_processes", "2", "--process_id", "1",
+                           "--coordinator_timeout", "2"], capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert proc.returncode == 2 and "error: cannot reach the coordinator" in proc.stderr
+    assert time.time() - t0 < 30 and not (tmp_path / "r").exists()
+
+
+# ---------------------------------------------------------------------------
+# Ray
+
+
+TINY_SETTINGS = dict(batch_size=8, num_minibatches=2, unroll_length=4, num_evals=2, num_eval_envs=2,
+                     episode_length=20, hidden=[16, 16], update_epochs=1, cpu_devices=1)
+
+
+@pytest.fixture(scope="module")
+def local_ray():
+    import ray
+
+    ray_runs.start("local")
+    yield
+    ray.shutdown()
+
+
+def test_a_grid_on_ray_gives_the_sequential_grids_results(tmp_path, local_ray, cache_env):
+    def grid(out):
+        return experiments.grid("main", out, timesteps=64, seeds=1, num_envs=8, **TINY_SETTINGS)
+
+    sequential, on_ray = tmp_path / "sequential", tmp_path / "ray"
+    todo, _ = experiments.plan(grid(sequential))
+    for cfg in todo:  # train.py, one after another, from the command line a sweep would print
+        flags = ray_runs.command_line(cfg).split()[2:]
+        subprocess.run([sys.executable, str(ROOT / "train.py"), *flags], check=True, cwd=ROOT, env=cache_env,
+                       capture_output=True, timeout=600)
+    todo, counts = experiments.plan(grid(on_ray))
+    assert counts == {"done": 0, "reused": 0, "partial": 0, "new": 2}
+    ray_runs.run_grid(todo, run_cpus=1, run_gpus=0)
+    drop = lambda row: {k: v for k, v in row.items() if k not in ("walltime_s", "env_steps_per_s")}  # noqa: E731
+    for run in grid(sequential):
+        twin = on_ray / "main" / Path(run.config.run_dir).name
+        assert [drop(r) for r in rows(twin)] == [drop(r) for r in rows(Path(run.config.run_dir))]
+    assert study_results.final_table(study_results.load_runs(on_ray)) == study_results.final_table(
+        study_results.load_runs(sequential))
+    # Finished runs are skipped when the grid is submitted again.
+    assert experiments.plan(grid(on_ray)) == ([], {"done": 2, "reused": 0, "partial": 0, "new": 0})
+
+
+def test_sweep_spaces_are_checked_before_ray_starts(tmp_path):
+    def space(obj):
+        path = tmp_path / "space.json"
+        path.write_text(json.dumps(obj))
+        return path
+
+    good = ray_runs.load_space(space({"lr": {"loguniform": [1e-4, 1e-3]}, "update_epochs": {"choice": [2, 4]}}))
+    assert set(good) == {"lr", "update_epochs"}
+    for bad, message in [({"learning_rate": 1e-3}, "unknown flags: learning_rate"),
+                         ({"lr": {"loguniform": [1e-3, 1e-4]}}, "low <= high"),
+                         ({"lr": {"loguniform": [0, 1e-3]}}, "low > 0"),
+                         ({"lr": {"gaussian": [0, 1]}}, "must be a value or one of"),
+                         ({"discount": {"choice": [0.9, 1.5]}}, "discount=1.5 is not a valid setting"),
+                         ([], "must be a JSON object")]:
+        with pytest.raises(ValueError, match=message):
+            ray_runs.load_space(space(bad))
+    with pytest.raises(ValueError, match="no Ray cluster answers"):
+        ray_runs.check_address(f"localhost:{free_port()}", timeout_s=1)
+
+
+def test_the_best_trial_is_printed_as_a_train_command():
+    cfg = config.TrainConfig(lr=0.0005, hidden=[64, 64], update_epochs=4, compile_cache=False, run_dir="runs/x")
+    line = ray_runs.command_line(cfg)
+    assert line == "python train.py --lr 0.0005 --run_dir runs/x --update_epochs 4 --hidden 64 64 --no_compile_cache"
+    assert config.parse_args(line.split()[2:]) == dataclasses.replace(cfg, reward="goal_directed")
+    rows_ = [{"steps": 100, "episode_return": 5.0, "success_rate": 0.5}, {"steps": 40, "episode_return": 9.0,
+             "success_rate": 1.0}, {"steps": 100, "episode_return": 7.0, "success_rate": 0.5}]
+    assert ray_runs.best(rows_, "success_rate", 100) is rows_[2]  # stopped trials never win; ties by return
