@@ -199,6 +199,9 @@ def main(argv=None) -> int:
     except (ValueError, FileNotFoundError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
+    except RuntimeError as e:  # a run failed on Ray; the others are finished and kept
+        print(f"error: {e}", file=sys.stderr)
+        return 1
     for path in paths:
         print(f"wrote {path}")
     return 0

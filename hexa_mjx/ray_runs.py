@@ -84,7 +84,16 @@ def run_grid(todo: list[config.TrainConfig], run_cpus: int, run_gpus: float) -> 
         num_cpus=run_cpus, num_gpus=run_gpus, max_calls=1, max_retries=RETRIES, retry_exceptions=False)
     refs = [remote.remote(dataclasses.asdict(dataclasses.replace(cfg, cpu_devices=cpu_devices(cfg, run_cpus, run_gpus))),
                           run_gpus) for cfg in todo]
-    return ray.get(refs)
+    results, failed = [], []
+    for cfg, ref in zip(todo, refs):
+        try:
+            results.append(ray.get(ref))
+        except ray.exceptions.RayError as e:  # the run raised, or its worker died RETRIES + 1 times
+            failed.append(f"{cfg.run_dir} ({type(e).__name__}: {str(e).strip().splitlines()[-1][:200]})")
+    if failed:
+        raise RuntimeError(f"{len(failed)} of {len(todo)} runs failed: {'; '.join(failed)}. Run the same command "
+                           "again to resume them")
+    return results
 
 
 def cpu_devices(cfg: config.TrainConfig, run_cpus: int, run_gpus: float) -> int:
