@@ -98,6 +98,8 @@ def initialize(coordinator: str = "", num_processes: int = 1, process_id: int = 
     import jax
 
     check(coordinator, num_processes, process_id, timeout_s)
+    # Cross-process reductions on CPUs go over gloo (JAX's default here; set so it stays so).
+    jax.config.update("jax_cpu_collectives_implementation", "gloo")
     if num_processes > 1:
         if process_id == 0:
             check_port_free(coordinator)

@@ -73,6 +73,9 @@ class HexapodEnv(Env):
         device = jax.local_devices()[0]
         self.mjx_model = mjx.put_model(self.mj_model, impl="jax", device=device)
         self._data0 = mjx.make_data(self.mjx_model, impl="jax", device=device)
+        if self.config.max_contact_points > self.contact_slots:  # a cap above the slots would cap nothing
+            raise ValueError(f"max_contact_points {self.config.max_contact_points} is above the model's "
+                             f"{self.contact_slots} robot-floor contact slots; use 1 to {self.contact_slots}, or 0 for all")
 
     # -- brax Env interface -------------------------------------------------
 

@@ -107,6 +107,10 @@ def check_config(config: EnvConfig) -> None:
                          f"and max {config.goal_max_distance} m")
     if config.episode_length < 1:
         raise ValueError(f"episode_length must be at least 1, got {config.episode_length}")
+    for name in ("solver_iterations", "ls_iterations"):
+        value = getattr(config, name)
+        if value is not None and not (isinstance(value, int) and value >= 1):
+            raise ValueError(f"{name} must be at least 1 (or None: the model's own setting), got {value}")
     if config.max_contact_points < 0:
         raise ValueError(f"max_contact_points must be 0 (every contact slot) or positive, "
                          f"got {config.max_contact_points}")

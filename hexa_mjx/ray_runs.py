@@ -80,8 +80,8 @@ def run_grid(todo: list[config.TrainConfig], run_cpus: int, run_gpus: float) -> 
     run's last evaluation row, in order."""
     import ray
 
-    remote = ray.remote(train_in_worker).options(
-        num_cpus=run_cpus, num_gpus=run_gpus, max_calls=1, max_retries=RETRIES, retry_exceptions=False)
+    remote = ray.remote(num_cpus=run_cpus, num_gpus=run_gpus, max_calls=1, max_retries=RETRIES,
+                        retry_exceptions=False)(train_in_worker)
     refs = [remote.remote(dataclasses.asdict(dataclasses.replace(cfg, cpu_devices=cpu_devices(cfg, run_cpus, run_gpus))),
                           run_gpus) for cfg in todo]
     results, failed = [], []

@@ -3,6 +3,7 @@ anything compiles, and nothing written. Each command runs in this process (its m
 with the compiling step replaced by a failure, so a case that slipped past validation fails the
 test instead of training."""
 
+import dataclasses
 import json
 import sys
 import time
@@ -10,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from hexa_mjx import convert, env_config, evaluation, training
+from hexa_mjx import config, convert, env_config, evaluation, training
 from hexa_mjx.tasks import make_env
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -62,6 +63,7 @@ TRAIN_CASES = [
     (["--action_latency", "5"], "action_latency is in control steps from 0 to 1"),
     (["--obs_noise", "-1"], "obs_noise is a multiple of the noise scales"),
     (["--max_contact_points", "-1"], "max_contact_points must be 0"),
+    (["--max_contact_points", "999"], "above the model's 40 robot-floor contact slots"),
     (["--model", "nowhere.xml"], "--model nowhere.xml is not a file"),
     (["--num_processes", "2", "--process_id", "5", "--coordinator", "localhost:1"], "--process_id must be in 0..1"),
     (["--num_processes", "2"], "needs --coordinator HOST:PORT"),
@@ -84,6 +86,7 @@ EVAL_CASES = [
     (["--ckpt", POLICY, "--push_speed", "-1"], "push_speed is a speed in m/s"),
     (["--ckpt", POLICY, "--action_latency", "2"], "action_latency is in control steps from 0 to 1"),
     (["--ckpt", POLICY, "--out", "/proc/hexa_mjx_eval"], "cannot write to --out"),
+    (["--ckpt", POLICY, "--max_contact_points", "999"], "above the model's 40 robot-floor contact slots"),
 ]
 
 CONVERT_CASES = [
@@ -128,7 +131,7 @@ def run_main(main, argv):
 
 
 def test_the_table_holds_forty_distinct_cases():
-    cases = [tuple(a) for a, _ in TRAIN_CASES + EVAL_CASES + CONVERT_CASES] + [tuple(k) for k, _ in MAKE_ENV_CASES]
+    cases = [tuple(a) for a, _ in TRAIN_CASES + EVAL_CASES + CONVERT_CASES] + [repr(k) for k, _ in MAKE_ENV_CASES]
     assert len(set(cases)) == len(cases) >= 40
 
 
@@ -144,13 +147,14 @@ def test_train_rejects(argv, message, tmp_path, capsys, nothing_compiles):
 def test_train_rejects_a_resume_with_other_settings(tmp_path, capsys, nothing_compiles):
     run_dir = tmp_path / "run"
     run_dir.mkdir()
-    (run_dir / "config.json").write_text(json.dumps({"seed": 3}))
+    saved = dataclasses.asdict(config.TrainConfig(seed=3, reward="goal_directed", run_dir=str(run_dir)))
+    (run_dir / "config.json").write_text(json.dumps(saved))
     before = sorted(p.name for p in run_dir.iterdir())
     code, _ = run_main(train_script.main, ["--run_dir", str(run_dir), "--resume"])
     err = capsys.readouterr().err
     assert code == 2 and "holds a different run: seed=3" in err and one_error_line(err)
     assert sorted(p.name for p in run_dir.iterdir()) == before
-    assert json.loads((run_dir / "config.json").read_text()) == {"seed": 3}
+    assert json.loads((run_dir / "config.json").read_text()) == saved
 
 
 @pytest.mark.parametrize("argv, message", EVAL_CASES, ids=[" ".join(a) for a, _ in EVAL_CASES])

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from hexa_mjx import config, experiments, ray_runs, study_results
+from hexa_mjx import config, distributed, experiments, ray_runs, study_results
 
 ROOT = Path(__file__).resolve().parent.parent
 # 8 envs split over 2 processes of 1 CPU device each; 64 env steps per update; tiny networks.
@@ -29,10 +29,11 @@ def train_processes(args_per_process, env, timeout=600):
     """Start one train.py per argument list; returns their (returncode, stdout, stderr)."""
     procs = [subprocess.Popen([sys.executable, str(ROOT / "train.py"), *args], cwd=ROOT, env=env, text=True,
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE) for args in args_per_process]
-    return [(p.returncode, *p.communicate(timeout=timeout)) for p in procs]
+    outputs = [p.communicate(timeout=timeout) for p in procs]
+    return [(p.returncode, *out) for p, out in zip(procs, outputs)]
 
 
-def distributed(port, n=2):
+def process_flags(port, n=2):
     return [["--coordinator", f"localhost:{port}", "--num_processes", str(n), "--process_id", str(i),
              "--coordinator_timeout", "60"] for i in range(n)]
 
@@ -44,24 +45,40 @@ def rows(run_dir):
 def test_two_processes_train_to_the_end_and_resume(tmp_path, cache_env):
     run_dir = tmp_path / "mp"
     results = train_processes([[*TINY, "--num_timesteps", "64", "--run_dir", str(run_dir), *d]
-                               for d in distributed(free_port())], cache_env)
+                               for d in process_flags(free_port())], cache_env)
     assert [r[0] for r in results] == [0, 0], results
     assert "x 2 processes" in results[0][1] and "process 1 done" in results[1][1]
     assert [r["step"] for r in rows(run_dir)] == [0, 64]  # process 0 alone writes, each row once
     assert sorted(p.name for p in (run_dir / "checkpoints").iterdir()) == [f"{64:012d}"]
     results = train_processes([[*TINY, "--num_timesteps", "128", "--run_dir", str(run_dir), "--resume", *d]
-                               for d in distributed(free_port())], cache_env)
+                               for d in process_flags(free_port())], cache_env)
     assert [r[0] for r in results] == [0, 0], results
     assert "resuming" in results[0][1]
     assert [r["step"] for r in rows(run_dir)] == [0, 64, 128]
 
 
 def test_processes_with_different_settings_stop_together(tmp_path, cache_env):
-    port = free_port()
-    args = [[*TINY, "--seed", str(i), "--run_dir", str(tmp_path / "r"), *d] for i, d in enumerate(distributed(port))]
+    args = [[*TINY, "--seed", str(i), "--run_dir", str(tmp_path / "r"), *d]
+            for i, d in enumerate(process_flags(free_port()))]
     for code, out, err in train_processes(args, cache_env, timeout=120):
         assert code == 2 and "error: the processes were started with different settings (--seed)" in err, err
     assert not (tmp_path / "r" / "config.json").exists()
+    # 3 environments cannot split over 2 processes' devices: every process says so and stops.
+    odd = ["--num_envs", "3", "--batch_size", "3", "--num_minibatches", "2"]
+    args = [[*TINY, *odd, "--run_dir", str(tmp_path / "r"), *d] for d in process_flags(free_port())]
+    for code, out, err in train_processes(args, cache_env, timeout=120):
+        assert code == 2 and "2 devices (2 processes) must divide --num_envs (3)" in err, err
+
+
+def test_a_scheduler_job_is_joined_without_flags(monkeypatch):
+    for name in ("SLURM_JOB_ID", "SLURM_NTASKS", "OMPI_COMM_WORLD_SIZE"):
+        monkeypatch.delenv(name, raising=False)
+    assert distributed.scheduled_tasks() == 1
+    monkeypatch.setenv("SLURM_JOB_ID", "42")
+    monkeypatch.setenv("SLURM_NTASKS", "4")
+    assert distributed.scheduled_tasks() == 4
+    monkeypatch.setenv("SLURM_NTASKS", "1")
+    assert distributed.scheduled_tasks() == 1  # a one-task job is a plain run
 
 
 @pytest.mark.parametrize("flags, message", [
@@ -95,30 +112,44 @@ TINY_SETTINGS = dict(batch_size=8, num_minibatches=2, unroll_length=4, num_evals
 
 
 @pytest.fixture(scope="module")
-def local_ray():
+def local_ray(cache_env):
+    """A local Ray instance whose workers share the suite's compilation cache."""
+    import os
+
     import ray
 
+    before = os.environ.get("JAX_COMPILATION_CACHE_DIR")
+    os.environ["JAX_COMPILATION_CACHE_DIR"] = cache_env["JAX_COMPILATION_CACHE_DIR"]  # workers inherit it
     ray_runs.start("local")
     yield
     ray.shutdown()
+    if before is None:
+        os.environ.pop("JAX_COMPILATION_CACHE_DIR")
+    else:
+        os.environ["JAX_COMPILATION_CACHE_DIR"] = before
 
 
 def test_a_grid_on_ray_gives_the_sequential_grids_results(tmp_path, local_ray, cache_env):
-    def grid(out):
-        return experiments.grid("main", out, timesteps=64, seeds=1, num_envs=8, **TINY_SETTINGS)
+    def grid(out):  # two seeds of one condition: one program to compile, shared through the cache
+        runs = experiments.grid("lr", out, timesteps=64, seeds=2, num_envs=8, **TINY_SETTINGS)
+        return [run for run in runs if run.condition == "lr_0.0003"]
 
     sequential, on_ray = tmp_path / "sequential", tmp_path / "ray"
     todo, _ = experiments.plan(grid(sequential))
     for cfg in todo:  # train.py, one after another, from the command line a sweep would print
         flags = ray_runs.command_line(cfg).split()[2:]
+        t0 = time.time()
         subprocess.run([sys.executable, str(ROOT / "train.py"), *flags], check=True, cwd=ROOT, env=cache_env,
                        capture_output=True, timeout=600)
+        print(f"sequential run: {time.time() - t0:.0f} s")
     todo, counts = experiments.plan(grid(on_ray))
     assert counts == {"done": 0, "reused": 0, "partial": 0, "new": 2}
+    t0 = time.time()
     ray_runs.run_grid(todo, run_cpus=1, run_gpus=0)
+    print(f"ray grid: {time.time() - t0:.0f} s")
     drop = lambda row: {k: v for k, v in row.items() if k not in ("walltime_s", "env_steps_per_s")}  # noqa: E731
     for run in grid(sequential):
-        twin = on_ray / "main" / Path(run.config.run_dir).name
+        twin = on_ray / "lr" / Path(run.config.run_dir).name
         assert [drop(r) for r in rows(twin)] == [drop(r) for r in rows(Path(run.config.run_dir))]
     assert study_results.final_table(study_results.load_runs(on_ray)) == study_results.final_table(
         study_results.load_runs(sequential))
