@@ -49,7 +49,8 @@ def start(address: str) -> None:
     import ray
 
     check_address(address)
-    ray.init(address=None if address == "local" else address, include_dashboard=False,
+    # "local" makes Ray start a new instance even when another one runs on this machine.
+    ray.init(address=address, include_dashboard=False,
              log_to_driver=True, configure_logging=False)
 
 

@@ -110,7 +110,7 @@ def test_restart_draws_a_new_heading_and_goal(nav_env, state0):
 def test_waypoints_are_followed_in_order_and_the_last_stays():
     env = hexa_mjx.make_env(task="navigate", waypoints=[(0.3, 0.0), (1.0, 0.0)])
     start = np.asarray(env.qpos0[:2])
-    data = env.restart(env.reset(jax.random.PRNGKey(0)).pipeline_state, jax.random.PRNGKey(1))
+    data = jax.jit(env.restart)(jax.jit(env.reset)(jax.random.PRNGKey(0)).pipeline_state, jax.random.PRNGKey(1))
     np.testing.assert_allclose(env.goal(data), start + [0.3, 0.0], atol=1e-6)
     np.testing.assert_allclose(env.next_goal(data, jp.int32(1), jax.random.PRNGKey(2)), start + [1.0, 0.0])
     np.testing.assert_allclose(env.next_goal(data, jp.int32(2), jax.random.PRNGKey(2)), start + [1.0, 0.0])

@@ -2,6 +2,7 @@
 
 import dataclasses
 import json
+import os
 import socket
 import subprocess
 import sys
@@ -10,9 +11,11 @@ from pathlib import Path
 
 import pytest
 
-from hexa_mjx import config, distributed, experiments, ray_runs, study_results
+from hexa_mjx import checkpoints, config, distributed, experiments, ray_runs
 
-ROOT = Path(__file__).resolve().parent.parent
+from conftest import NOISE, ROOT, TINY as TINY_SHAPE  # the `trained` run's settings (tests/conftest.py)
+
+TRAINED = [*TINY_SHAPE, *NOISE, "--seed", "3"]
 # 8 envs split over 2 processes of 1 CPU device each; 64 env steps per update; tiny networks.
 TINY = ["--num_envs", "8", "--batch_size", "8", "--num_minibatches", "2", "--unroll_length", "4",
         "--num_evals", "2", "--num_eval_envs", "2", "--episode_length", "20", "--hidden", "16", "16",
@@ -42,19 +45,25 @@ def rows(run_dir):
     return [json.loads(line) for line in (run_dir / "metrics.jsonl").read_text().splitlines()]
 
 
-def test_two_processes_train_to_the_end_and_resume(tmp_path, cache_env):
-    run_dir = tmp_path / "mp"
-    results = train_processes([[*TINY, "--num_timesteps", "64", "--run_dir", str(run_dir), *d]
-                               for d in process_flags(free_port())], cache_env)
+def test_two_processes_resume_a_run_and_train_it_to_the_end(trained, cache_env, tmp_path):
+    """The tiny run of tests/test_train_eval.py, resumed from its checkpoint by 2 processes after a
+    crash: process 0 reads the checkpoint and shares it, both train, process 0 alone writes."""
+    run_dir, _ = trained
+    resumed = tmp_path / "resumed"
+    subprocess.run(["cp", "-r", str(run_dir), str(resumed)], check=True)
+    # A checkpoint interrupted mid-write (killed before its rename) is ignored and removed.
+    (resumed / "checkpoints" / "tmp-000000000128-999").mkdir()
+    # Killed between checkpoint 64 and its evaluation row: that row is missing, and a half line is left.
+    metrics = resumed / "metrics.jsonl"
+    metrics.write_text(metrics.read_text().splitlines()[0] + "\n" + '{"step": 6')
+    results = train_processes([[*TRAINED, "--num_timesteps", "128", "--run_dir", str(resumed), "--resume",
+                                "--cpu_devices", "1", *flags] for flags in process_flags(free_port())], cache_env)
     assert [r[0] for r in results] == [0, 0], results
-    assert "x 2 processes" in results[0][1] and "process 1 done" in results[1][1]
-    assert [r["step"] for r in rows(run_dir)] == [0, 64]  # process 0 alone writes, each row once
-    assert sorted(p.name for p in (run_dir / "checkpoints").iterdir()) == [f"{64:012d}"]
-    results = train_processes([[*TINY, "--num_timesteps", "128", "--run_dir", str(run_dir), "--resume", *d]
-                               for d in process_flags(free_port())], cache_env)
-    assert [r[0] for r in results] == [0, 0], results
-    assert "resuming" in results[0][1]
-    assert [r["step"] for r in rows(run_dir)] == [0, 64, 128]
+    assert "x 2 processes" in results[0][1] and "resuming" in results[0][1] and "from step 64" in results[0][1]
+    assert "process 1 done" in results[1][1]
+    assert [r["step"] for r in rows(resumed)] == [0, 64, 128]  # each evaluation exactly once
+    assert [step for step, _ in checkpoints.list_checkpoints(resumed)] == [64, 128]
+    assert not list((resumed / "checkpoints").glob("tmp-*"))
 
 
 def test_processes_with_different_settings_stop_together(tmp_path, cache_env):
@@ -107,15 +116,9 @@ def test_an_unreachable_coordinator_fails_within_its_timeout(tmp_path):
 # Ray
 
 
-TINY_SETTINGS = dict(batch_size=8, num_minibatches=2, unroll_length=4, num_evals=2, num_eval_envs=2,
-                     episode_length=20, hidden=[16, 16], update_epochs=1, cpu_devices=1)
-
-
 @pytest.fixture(scope="module")
 def local_ray(cache_env):
     """A local Ray instance whose workers share the suite's compilation cache."""
-    import os
-
     import ray
 
     before = os.environ.get("JAX_COMPILATION_CACHE_DIR")
@@ -129,32 +132,27 @@ def local_ray(cache_env):
         os.environ["JAX_COMPILATION_CACHE_DIR"] = before
 
 
-def test_a_grid_on_ray_gives_the_sequential_grids_results(tmp_path, local_ray, cache_env):
-    def grid(out):  # two seeds of one condition: one program to compile, shared through the cache
-        runs = experiments.grid("lr", out, timesteps=64, seeds=2, num_envs=8, **TINY_SETTINGS)
-        return [run for run in runs if run.condition == "lr_0.0003"]
+def test_a_grid_on_ray_gives_the_sequential_runs_results(trained, tmp_path, local_ray):
+    """Seeds 2 and 3 of the tiny run as a grid on Ray: seed 3 is the `trained` run train.py made,
+    and must give the same evaluations; finished runs are then skipped."""
+    run_dir, _ = trained
+    settings = {k: v for k, v in dataclasses.asdict(config.load_config(run_dir)).items()
+                if k not in ("seed", "run_dir", "lr", "num_envs", "num_timesteps", "resume", "reward", "task")}
+    # As many devices as train.py gave the run (one per core, dividing its 8 environments).
+    devices = max(d for d in range(1, len(os.sched_getaffinity(0)) + 1) if 8 % d == 0)
 
-    sequential, on_ray = tmp_path / "sequential", tmp_path / "ray"
-    todo, _ = experiments.plan(grid(sequential))
-    for cfg in todo:  # train.py, one after another, from the command line a sweep would print
-        flags = ray_runs.command_line(cfg).split()[2:]
-        t0 = time.time()
-        subprocess.run([sys.executable, str(ROOT / "train.py"), *flags], check=True, cwd=ROOT, env=cache_env,
-                       capture_output=True, timeout=600)
-        print(f"sequential run: {time.time() - t0:.0f} s")
-    todo, counts = experiments.plan(grid(on_ray))
+    def grid():
+        runs = experiments.grid("lr", tmp_path, timesteps=64, seeds=4, num_envs=8, **settings)
+        return [run for run in runs if run.condition == "lr_0.0003" and run.seed >= 2]
+
+    todo, counts = experiments.plan(grid())
     assert counts == {"done": 0, "reused": 0, "partial": 0, "new": 2}
-    t0 = time.time()
-    ray_runs.run_grid(todo, run_cpus=1, run_gpus=0)
-    print(f"ray grid: {time.time() - t0:.0f} s")
+    ray_runs.run_grid(todo, run_cpus=devices, run_gpus=0)
     drop = lambda row: {k: v for k, v in row.items() if k not in ("walltime_s", "env_steps_per_s")}  # noqa: E731
-    for run in grid(sequential):
-        twin = on_ray / "lr" / Path(run.config.run_dir).name
-        assert [drop(r) for r in rows(twin)] == [drop(r) for r in rows(Path(run.config.run_dir))]
-    assert study_results.final_table(study_results.load_runs(on_ray)) == study_results.final_table(
-        study_results.load_runs(sequential))
-    # Finished runs are skipped when the grid is submitted again.
-    assert experiments.plan(grid(on_ray)) == ([], {"done": 2, "reused": 0, "partial": 0, "new": 0})
+    on_ray = tmp_path / "lr" / "lr_0.0003-s3"
+    assert [drop(r) for r in rows(on_ray)] == [drop(r) for r in rows(run_dir)]
+    assert [r["step"] for r in rows(tmp_path / "lr" / "lr_0.0003-s2")] == [0, 64]
+    assert experiments.plan(grid()) == ([], {"done": 2, "reused": 0, "partial": 0, "new": 0})
 
 
 def test_sweep_spaces_are_checked_before_ray_starts(tmp_path):

@@ -5,9 +5,7 @@ import json
 import os
 import re
 import subprocess
-import sys
 from types import SimpleNamespace
-from pathlib import Path
 
 import imageio.v2 as imageio
 import jax
@@ -16,32 +14,7 @@ import pytest
 
 from hexa_mjx import checkpoints, config, evaluation, training, video
 
-ROOT = Path(__file__).resolve().parent.parent
-# A tiny rollout shape: 8 envs x 4 steps x 2 minibatches = 64 env steps per update.
-TINY = ["--num_envs", "8", "--batch_size", "8", "--num_minibatches", "2", "--unroll_length", "4",
-        "--num_evals", "2", "--num_eval_envs", "2", "--episode_length", "20"]
-
-
-# The trained fixture draws start noise per episode (hexa_mjx.wrappers instead of brax's auto-reset),
-# and trains on randomized physics with pushes: the whole path of those through brax's PPO.
-NOISE = ["--start_joint_noise", "0.05", "--start_yaw_noise", "0.1", "--progress", "--randomize",
-         "--push_speed", "0.3", "--push_interval", "0.1"]
-
-
-def run(script, *args, env=None, check=True):
-    proc = subprocess.run([sys.executable, str(ROOT / script), *args], capture_output=True, text=True,
-                          cwd=ROOT, env=env, timeout=900)
-    if check and proc.returncode != 0:
-        raise AssertionError(f"{script} {' '.join(args)} failed ({proc.returncode}):\n{proc.stdout}\n{proc.stderr}")
-    return proc
-
-
-@pytest.fixture(scope="session")
-def trained(tmp_path_factory, cache_env):
-    run_dir = tmp_path_factory.mktemp("runs") / "tiny"
-    proc = run("train.py", *TINY, *NOISE, "--num_timesteps", "64", "--seed", "3", "--run_dir", str(run_dir),
-               env=cache_env)
-    return run_dir, proc
+from conftest import NOISE, TINY, run  # noqa: E402  (the shared tiny run: tests/conftest.py)
 
 
 def rows(run_dir):
@@ -71,21 +44,7 @@ def test_saved_config_round_trips(trained):
     assert saved.seed == 3 and saved.hidden == [256, 256] and saved.discount == 0.99
 
 
-def test_resume_continues_step_count(trained, cache_env, tmp_path):
-    run_dir, _ = trained
-    resumed = tmp_path / "resumed"
-    subprocess.run(["cp", "-r", str(run_dir), str(resumed)], check=True)
-    # A checkpoint interrupted mid-write (killed before its rename) is ignored and removed.
-    (resumed / "checkpoints" / "tmp-000000000128-999").mkdir()
-    # Killed between checkpoint 64 and its evaluation row: that row is missing, and a half line is left.
-    metrics = resumed / "metrics.jsonl"
-    metrics.write_text(metrics.read_text().splitlines()[0] + "\n" + '{"step": 6')
-    proc = run("train.py", *TINY, *NOISE, "--num_timesteps", "128", "--seed", "3", "--run_dir", str(resumed),
-               "--resume", env=cache_env)
-    assert "resuming" in proc.stdout and "from step 64" in proc.stdout
-    assert [r["step"] for r in rows(resumed)] == [0, 64, 128]  # each evaluation exactly once
-    assert [step for step, _ in checkpoints.list_checkpoints(resumed)] == [64, 128]
-    assert not list((resumed / "checkpoints").glob("tmp-*"))
+# Resuming from a checkpoint (with crash debris) is tested on two processes: tests/test_scale_out.py.
 
 
 def test_resume_before_the_first_checkpoint_says_so(trained, cache_env, tmp_path):
