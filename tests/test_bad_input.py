@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from hexa_mjx import config, convert, env_config, evaluation, training
+from hexa_mjx import config, convert, env_config, evaluation, jax_setup, training
 from hexa_mjx.tasks import make_env
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -119,6 +119,9 @@ def nothing_compiles(monkeypatch):
 
     monkeypatch.setattr(training, "train", refuse)
     monkeypatch.setattr(evaluation, "rollout", refuse)
+    # JAX is already running in this process: keep the commands from pointing its compilation
+    # cache at the user's folder for the rest of the suite.
+    monkeypatch.setattr(jax_setup, "prepare_jax", lambda *args, **kwargs: None)
 
 
 def run_main(main, argv):
