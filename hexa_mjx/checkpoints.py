@@ -1,9 +1,11 @@
-"""Checkpoints: atomic orbax folders of (normalizer, policy, value) params, one per evaluation.
+"""Checkpoints: atomic folders of (normalizer, policy, value) params and Adam's state, one per evaluation.
 
-`<run>/checkpoints/<step:012d>/` holds `params/` (orbax) and `step.json` (the step and a SHA-256
-of every file under params/); each is written to a temporary folder and renamed when complete, so
-a crash leaves the last complete one readable. Loading checks the digest and that every value is
-finite; `load_latest` falls back to the newest checkpoint that passes, and says so.
+`<run>/checkpoints/<step:012d>/` holds `params/` (orbax), `optimizer.npz` (Adam's moments and
+step count as brax's PPO left them, in `jax.tree.leaves` order; see `hexa_mjx.optimizer_state`)
+and `step.json` (the step and a SHA-256 of each). Each is written to a temporary folder and
+renamed when complete, so a crash leaves the last complete one readable. Loading checks the
+digests and that every value is finite; `load_latest` falls back to the newest checkpoint that
+passes, and says so. Checkpoints from before the optimizer state was saved load as before.
 """
 
 from __future__ import annotations
@@ -20,6 +22,10 @@ from pathlib import Path
 
 import jax
 import numpy as np
+
+from hexa_mjx import faults
+
+OPTIMIZER_FILE = "optimizer.npz"
 
 
 def checkpoint_dir(run_dir: Path) -> Path:
@@ -45,8 +51,9 @@ def remove_temporaries(run_dir: Path) -> int:
     return len(stale)
 
 
-def save_checkpoint(run_dir: Path, step: int, params) -> Path:
-    """Write params for `step` atomically: into a temporary folder, renamed when complete."""
+def save_checkpoint(run_dir: Path, step: int, params, optimizer=None) -> Path:
+    """Write params (and the optimizer state, if given) for `step` atomically: into a temporary
+    folder, renamed when complete."""
     root = checkpoint_dir(run_dir)
     root.mkdir(parents=True, exist_ok=True)
     final, tmp = root / f"{step:012d}", root / f"tmp-{step:012d}-{os.getpid()}"
@@ -54,10 +61,16 @@ def save_checkpoint(run_dir: Path, step: int, params) -> Path:
     checkpointer = checkpointer_here()
     checkpointer.save(tmp.resolve() / "params", host_tree(params))
     checkpointer.wait_until_finished()
-    (tmp / "step.json").write_text(json.dumps({"step": step, "sha256": digest(tmp / "params")}))
+    meta = {"step": step, "sha256": digest(tmp / "params")}
+    if optimizer is not None:
+        np.savez(tmp / OPTIMIZER_FILE, *[np.asarray(x) for x in jax.tree.leaves(optimizer)])
+        meta["optimizer_sha256"] = digest(tmp / OPTIMIZER_FILE)
+    faults.point("checkpoint-writing")
+    (tmp / "step.json").write_text(json.dumps(meta))
     if final.exists():
         shutil.rmtree(final)
     tmp.rename(final)
+    faults.point("checkpoint-saved")
     return final
 
 
@@ -101,11 +114,14 @@ def like(template, plain):
     return plain
 
 
-def digest(folder: Path) -> str:
-    """SHA-256 over the relative paths and bytes of every file under `folder`."""
+def digest(path: Path) -> str:
+    """SHA-256 over the relative paths and bytes of every file under the folder `path` (or of one file)."""
+    path = Path(path)
+    if path.is_file():
+        return hashlib.sha256(path.read_bytes()).hexdigest()
     h = hashlib.sha256()
-    for f in sorted(p for p in Path(folder).rglob("*") if p.is_file()):
-        h.update(str(f.relative_to(folder)).encode() + b"\0" + f.read_bytes())
+    for f in sorted(p for p in path.rglob("*") if p.is_file()):
+        h.update(str(f.relative_to(path)).encode() + b"\0" + f.read_bytes())
     return h.hexdigest()
 
 
@@ -116,7 +132,8 @@ def load_checkpoint(path: Path, template):
     path = Path(path)
     try:
         meta = json.loads((path / "step.json").read_text())
-        if "sha256" in meta and digest(path / "params") != meta["sha256"]:
+        if "sha256" in meta and digest(path / "params") != meta["sha256"] or (
+                "optimizer_sha256" in meta and digest(path / OPTIMIZER_FILE) != meta["optimizer_sha256"]):
             raise ValueError("its files do not match the checksum written with them (changed or damaged on disk)")
         params = like(template, checkpointer_here().restore((path / "params").resolve(), host_tree(template)))
     except Exception as e:  # orbax raises many kinds; all mean the same to a user
@@ -129,15 +146,31 @@ def load_checkpoint(path: Path, template):
     return meta["step"], params
 
 
+def load_optimizer(path: Path, template):
+    """The optimizer state saved with checkpoint `path`, in `template`'s structure (NumPy leaves), or
+    None for a checkpoint written without one. Call after load_checkpoint, which checks its digest."""
+    file = Path(path) / OPTIMIZER_FILE
+    if not file.is_file():
+        return None
+    with np.load(file) as saved:
+        leaves = [saved[f"arr_{i}"] for i in range(len(saved.files))]
+    expected = jax.tree.leaves(template)
+    if len(leaves) != len(expected) or any(a.shape != np.shape(b) for a, b in zip(leaves, expected)):
+        raise RuntimeError(f"checkpoint {path}'s optimizer state does not fit this network's sizes")
+    if not all(np.isfinite(x).all() for x in leaves if np.issubdtype(x.dtype, np.inexact)):
+        raise RuntimeError(f"checkpoint {path} holds a non-finite (NaN or inf) optimizer state")
+    return jax.tree.unflatten(jax.tree.structure(template), leaves)
+
+
 def load_latest(run_dir: Path, template):
-    """(step, params) of the newest checkpoint that loads, warning on stderr about each newer one
-    that does not; (0, None) when there is none."""
+    """(step, params, path) of the newest checkpoint that loads, warning on stderr about each newer
+    one that does not; (0, None, None) when there is none."""
     for _, path in reversed(list_checkpoints(run_dir)):
         try:
-            return load_checkpoint(path, template)
+            return (*load_checkpoint(path, template), path)
         except RuntimeError as e:
             print(f"warning: {e}; falling back to the checkpoint before it", file=sys.stderr)
-    return 0, None
+    return 0, None, None
 
 
 def resolve_checkpoint(path: Path) -> tuple[Path, Path]:

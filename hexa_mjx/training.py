@@ -18,10 +18,12 @@ import jax
 import jax.numpy as jp
 from flax import linen
 
-from hexa_mjx import distributed, randomization
-from hexa_mjx.checkpoints import checkpoint_dir, list_checkpoints, load_latest, remove_temporaries, save_checkpoint
+from hexa_mjx import distributed, faults, randomization
+from hexa_mjx.checkpoints import (checkpoint_dir, list_checkpoints, load_latest, load_optimizer, remove_temporaries,
+                                  save_checkpoint)
 from hexa_mjx.config import TrainConfig, make_env_for, validate
 from hexa_mjx.jax_setup import devices_for, prepare_jax
+from hexa_mjx.optimizer_state import AdamRecorder, adam_template, recording
 from hexa_mjx.progress import Logger, keep_rows_up_to
 
 
@@ -91,21 +93,24 @@ def wrap_env_fn(env, randomized: bool = False):
     return wrappers.wrap_for_training if env.fresh_starts or randomized else None
 
 
-def resume_point(cfg: TrainConfig, run_dir: Path, template) -> tuple[int, object]:
-    """(step, params) to continue from: (0, None) for a new run, or one with no readable checkpoint."""
+def resume_point(cfg: TrainConfig, run_dir: Path, template, optimizer_template) -> tuple[int, object, object]:
+    """(step, params, Adam state) to continue from: (0, None, None) for a new run, or one with no
+    readable checkpoint; the Adam state is None for a checkpoint saved without it."""
     if remove_temporaries(run_dir):
         print(f"removed half-written checkpoint folders in {checkpoint_dir(run_dir)}")
     if not cfg.resume:
-        return 0, None
+        return 0, None, None
     if not list_checkpoints(run_dir):
         print(f"{run_dir} has no complete checkpoint yet (it stopped before its first): starting again from step 0")
-        return 0, None
-    start_step, restore = load_latest(run_dir, template)
+        return 0, None, None
+    start_step, restore, path = load_latest(run_dir, template)
     if restore is None:
         print(f"{run_dir} has no readable checkpoint: starting again from step 0")
-    else:
-        print(f"resuming {run_dir} from step {start_step:,}")
-    return start_step, restore
+        return 0, None, None
+    optimizer = load_optimizer(path, optimizer_template)
+    print(f"resuming {run_dir} from step {start_step:,}"
+          + ("" if optimizer is not None else " (its checkpoint has no optimizer state: Adam starts afresh)"))
+    return start_step, restore, optimizer
 
 
 def train(cfg: TrainConfig, on_eval=None) -> dict:
@@ -119,18 +124,24 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
     run_dir = Path(cfg.run_dir)
     env = make_env_for(cfg)
     template = init_params(cfg, env)
-    start_step, restore, logged = 0, None, set()
+    optimizer_template = adam_template(template)
+    start_step, restore, optimizer, logged = 0, None, None, set()
     if main:
-        start_step, restore = resume_point(cfg, run_dir, template)
+        start_step, restore, optimizer = resume_point(cfg, run_dir, template, optimizer_template)
         # One row per evaluation: rows past the checkpoint go, and the checkpoint's own evaluation is
         # logged again only if a crash came between saving it and writing its row.
         logged = keep_rows_up_to(run_dir, start_step)
         tmp = run_dir / "config.json.tmp"
         tmp.write_text(json.dumps(dataclasses.asdict(cfg), indent=2))
         tmp.replace(run_dir / "config.json")
-    start_step, restored = (int(x) for x in distributed.share(jp.array([start_step, restore is not None])))
+    start_step, restored, adam = (int(x) for x in distributed.share(
+        jp.array([start_step, restore is not None, optimizer is not None])))
     if restored:
         restore = distributed.share(restore if main else template)
+    if adam:
+        optimizer = distributed.share(optimizer if main else optimizer_template)
+    # brax's Adam, recorded for each checkpoint and restored from the last (hexa_mjx.optimizer_state).
+    recorder = AdamRecorder(cfg.update_epochs * cfg.num_minibatches, restored=optimizer)
     remaining = cfg.num_timesteps - start_step
     if remaining <= 0:
         print(f"{run_dir} already has {start_step:,} of {cfg.num_timesteps:,} steps; nothing to do")
@@ -138,19 +149,29 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
 
     logger = Logger(run_dir, cfg, start_step) if main else None
 
+    pending = {}  # the checkpoint brax handed over, saved once its evaluation row is written
+
     def on_progress(step, metrics):
         if logger is None:  # brax reports on process 0 only; kept safe for other callers
             return
         if "eval/episode_reward" not in metrics:  # a training batch (brax's log_training_metrics)
             logger.progress(start_step + step, metrics)
-        elif step > 0 or start_step not in logged:  # brax evaluates the restored params at its step 0
+            return
+        if step > 0 or start_step not in logged:  # brax evaluates the restored params at its step 0
             logger(start_step + step, metrics)
             if on_eval:
                 on_eval(logger.last)
+        if step == 0:
+            faults.point("training-started")
+        elif step in pending:
+            # Row first, then checkpoint: a crash between them loses neither, because a resume drops
+            # the rows past its checkpoint and trains those steps again.
+            faults.point("row-written")
+            save_checkpoint(run_dir, start_step + step, *pending.pop(step))
 
     def on_params(step, make_policy, params):
         if step > 0 and main:
-            save_checkpoint(run_dir, start_step + step, params)
+            pending[step] = (params, recorder.latest)
 
     t0 = time.time()
     devices = devices_for(cfg)
@@ -161,12 +182,13 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
     if logger:
         logger.compiling()
     randomization_fn = randomization.randomization_fn(env) if cfg.randomize else None
-    ppo.train(environment=env, num_timesteps=remaining, **ppo_settings(cfg), seed=cfg.seed + start_step,
-              max_devices_per_host=devices, wrap_env_fn=wrap_env_fn(env, cfg.randomize),
-              randomization_fn=randomization_fn,
-              num_evals=evals_for(cfg, remaining), num_eval_envs=cfg.num_eval_envs, deterministic_eval=True,
-              progress_fn=on_progress, policy_params_fn=on_params, restore_params=restore,
-              log_training_metrics=cfg.progress, training_metrics_steps=cfg.steps_per_update)
+    with recording(recorder):
+        ppo.train(environment=env, num_timesteps=remaining, **ppo_settings(cfg), seed=cfg.seed + start_step,
+                  max_devices_per_host=devices, wrap_env_fn=wrap_env_fn(env, cfg.randomize),
+                  randomization_fn=randomization_fn,
+                  num_evals=evals_for(cfg, remaining), num_eval_envs=cfg.num_eval_envs, deterministic_eval=True,
+                  progress_fn=on_progress, policy_params_fn=on_params, restore_params=restore,
+                  log_training_metrics=cfg.progress, training_metrics_steps=cfg.steps_per_update)
     total = time.time() - t0
     if logger is None:
         print(f"process {jax.process_index()} done: {remaining:,} steps in {total / 60:.1f} min")

@@ -6,7 +6,7 @@ import jax
 import numpy as np
 import pytest
 
-from hexa_mjx import checkpoints, config, training
+from hexa_mjx import checkpoints, config, optimizer_state, training
 
 
 @pytest.fixture(scope="module")
@@ -30,8 +30,8 @@ def test_a_damaged_checkpoint_is_an_error_and_resume_falls_back(template, tmp_pa
     biggest.write_bytes(bytes(data))
     with pytest.raises(RuntimeError, match="do not match the checksum"):
         checkpoints.load_checkpoint(newest, template)
-    step, params = checkpoints.load_latest(tmp_path, template)
-    assert step == 100 and "falling back to the checkpoint before it" in capsys.readouterr().err
+    step, params, path = checkpoints.load_latest(tmp_path, template)
+    assert step == 100 and path.name == f"{100:012d}" and "falling back to the checkpoint before it" in capsys.readouterr().err
     np.testing.assert_array_equal(jax.tree.leaves(params)[0], jax.tree.leaves(template)[0])
 
 
@@ -40,7 +40,7 @@ def test_non_finite_parameters_are_refused(template, tmp_path):
     path = checkpoints.save_checkpoint(tmp_path, 100, poisoned)
     with pytest.raises(RuntimeError, match="non-finite"):
         checkpoints.load_checkpoint(path, template)
-    assert checkpoints.load_latest(tmp_path, template) == (0, None)
+    assert checkpoints.load_latest(tmp_path, template) == (0, None, None)
 
 
 def test_saving_and_loading_print_nothing(template, tmp_path, capfd):
@@ -48,3 +48,20 @@ def test_saving_and_loading_print_nothing(template, tmp_path, capfd):
     checkpoints.load_checkpoint(path, template)
     out, err = capfd.readouterr()
     assert out == "" and err == ""
+
+
+def test_the_optimizer_state_round_trips_and_is_checked(template, env, tmp_path):
+    adam_template = optimizer_state.adam_template(template)
+    adam = jax.tree.map(lambda x: np.asarray(x) + 3, adam_template)  # moments 3, step count 3
+    path = checkpoints.save_checkpoint(tmp_path, 100, template, adam)
+    restored = checkpoints.load_optimizer(path, adam_template)
+    assert int(restored[0].count) == 3
+    jax.tree.map(np.testing.assert_array_equal, restored, adam)
+    with pytest.raises(RuntimeError, match="does not fit"):  # another network's sizes
+        checkpoints.load_optimizer(path, optimizer_state.adam_template(
+            training.init_params(config.TrainConfig(hidden=[4, 4]), env)))
+    (path / checkpoints.OPTIMIZER_FILE).write_bytes(b"damaged")
+    with pytest.raises(RuntimeError, match="do not match the checksum"):
+        checkpoints.load_checkpoint(path, template)
+    older = checkpoints.save_checkpoint(tmp_path, 50, template)  # as written before Adam's state was saved
+    assert checkpoints.load_optimizer(older, adam_template) is None

@@ -7,15 +7,13 @@ import socket
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import pytest
 
-from hexa_mjx import checkpoints, config, distributed, experiments, ray_runs
+from hexa_mjx import config, distributed, experiments, ray_runs
 
-from conftest import NOISE, ROOT, TINY as TINY_SHAPE  # the `trained` run's settings (tests/conftest.py)
+from conftest import ROOT
 
-TRAINED = [*TINY_SHAPE, *NOISE, "--seed", "3"]
 # 8 envs split over 2 processes of 1 CPU device each; 64 env steps per update; tiny networks.
 TINY = ["--num_envs", "8", "--batch_size", "8", "--num_minibatches", "2", "--unroll_length", "4",
         "--num_evals", "2", "--num_eval_envs", "2", "--episode_length", "20", "--hidden", "16", "16",
@@ -45,25 +43,7 @@ def rows(run_dir):
     return [json.loads(line) for line in (run_dir / "metrics.jsonl").read_text().splitlines()]
 
 
-def test_two_processes_resume_a_run_and_train_it_to_the_end(trained, cache_env, tmp_path):
-    """The tiny run of tests/test_train_eval.py, resumed from its checkpoint by 2 processes after a
-    crash: process 0 reads the checkpoint and shares it, both train, process 0 alone writes."""
-    run_dir, _ = trained
-    resumed = tmp_path / "resumed"
-    subprocess.run(["cp", "-r", str(run_dir), str(resumed)], check=True)
-    # A checkpoint interrupted mid-write (killed before its rename) is ignored and removed.
-    (resumed / "checkpoints" / "tmp-000000000128-999").mkdir()
-    # Killed between checkpoint 64 and its evaluation row: that row is missing, and a half line is left.
-    metrics = resumed / "metrics.jsonl"
-    metrics.write_text(metrics.read_text().splitlines()[0] + "\n" + '{"step": 6')
-    results = train_processes([[*TRAINED, "--num_timesteps", "128", "--run_dir", str(resumed), "--resume",
-                                "--cpu_devices", "1", *flags] for flags in process_flags(free_port())], cache_env)
-    assert [r[0] for r in results] == [0, 0], results
-    assert "x 2 processes" in results[0][1] and "resuming" in results[0][1] and "from step 64" in results[0][1]
-    assert "process 1 done" in results[1][1]
-    assert [r["step"] for r in rows(resumed)] == [0, 64, 128]  # each evaluation exactly once
-    assert [step for step, _ in checkpoints.list_checkpoints(resumed)] == [64, 128]
-    assert not list((resumed / "checkpoints").glob("tmp-*"))
+# Resuming on two processes after real crashes: tests/test_crashes.py.
 
 
 def test_processes_with_different_settings_stop_together(tmp_path, cache_env):

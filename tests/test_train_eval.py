@@ -44,20 +44,7 @@ def test_saved_config_round_trips(trained):
     assert saved.seed == 3 and saved.hidden == [256, 256] and saved.discount == 0.99
 
 
-# Resuming from a checkpoint (with crash debris) is tested on two processes: tests/test_scale_out.py.
-
-
-def test_resume_before_the_first_checkpoint_says_so(trained, cache_env, tmp_path):
-    run_dir, _ = trained
-    resumed = tmp_path / "early"
-    subprocess.run(["cp", "-r", str(run_dir), str(resumed)], check=True)
-    subprocess.run(["rm", "-r", str(resumed / "checkpoints")], check=True)
-    metrics = resumed / "metrics.jsonl"
-    metrics.write_text(metrics.read_text().splitlines()[0] + "\n")  # killed after step 0's row
-    proc = run("train.py", *TINY, *NOISE, "--num_timesteps", "64", "--seed", "3", "--run_dir", str(resumed),
-               "--resume", env=cache_env)
-    assert "no complete checkpoint yet" in proc.stdout and "starting again from step 0" in proc.stdout
-    assert [r["step"] for r in rows(resumed)] == [0, 64]  # step 0 not logged twice
+# Resuming after crashes at chosen moments (before the first checkpoint among them): tests/test_crashes.py.
 
 
 def test_runs_from_before_a_new_setting_resume(tmp_path):

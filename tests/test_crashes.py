@@ -1,0 +1,90 @@
+"""Crashes at chosen moments (a real SIGKILL through hexa_mjx.faults), each resumed: every
+evaluation row exactly once, every checkpoint readable, no temporary folder left, and Adam's state
+carried across (the last resume runs on 2 processes: process 0 reads and shares it)."""
+
+import json
+import signal
+
+import jax
+import numpy as np
+import optax
+
+from hexa_mjx import checkpoints, config, faults, optimizer_state, training
+
+from conftest import NOISE, TINY, run
+from test_scale_out import free_port, process_flags, train_processes
+
+# The shared tiny run's settings (8 envs, 64 env steps and 10 epochs x 2 minibatches per update),
+# with an evaluation and a checkpoint every 64 steps.
+SETTINGS = [*TINY, *NOISE, "--seed", "3", "--num_timesteps", "256", "--num_evals", "5"]
+ADAM_STEPS_PER_UPDATE = 10 * 2
+
+
+def rows(run_dir):
+    return [json.loads(line)["step"] for line in (run_dir / "metrics.jsonl").read_text().splitlines()]
+
+
+def killed_at(point, run_dir, cache_env, resume=True):
+    proc = run("train.py", *SETTINGS, "--run_dir", str(run_dir), *(["--resume"] if resume else []),
+               env={**cache_env, faults.VARIABLE: point}, check=False)
+    assert proc.returncode == -signal.SIGKILL, (proc.returncode, proc.stdout, proc.stderr)
+    return proc
+
+
+def test_kills_at_chosen_moments_resume_with_every_row_once(tmp_path, cache_env):
+    run_dir = tmp_path / "run"
+    killed_at("training-started", run_dir, cache_env, resume=False)  # after step 0's row
+    assert rows(run_dir) == [0] and not checkpoints.list_checkpoints(run_dir)
+
+    proc = killed_at("row-written", run_dir, cache_env)  # row 64 written, its checkpoint not
+    assert "no complete checkpoint yet" in proc.stdout and "starting again from step 0" in proc.stdout
+    assert rows(run_dir) == [0, 64] and not checkpoints.list_checkpoints(run_dir)
+
+    killed_at("checkpoint-writing@2", run_dir, cache_env)  # checkpoint 64 done, 128 half-written
+    assert rows(run_dir) == [0, 64, 128]
+    assert [s for s, _ in checkpoints.list_checkpoints(run_dir)] == [64]
+    assert list((run_dir / "checkpoints").glob("tmp-*"))
+
+    results = train_processes([[*SETTINGS, "--run_dir", str(run_dir), "--resume", "--cpu_devices", "1", *flags]
+                               for flags in process_flags(free_port())], cache_env)
+    assert [r[0] for r in results] == [0, 0], results
+    out = results[0][1]
+    assert "removed half-written" in out and "from step 64" in out and "x 2 processes" in out, out
+    assert "process 1 done" in results[1][1]
+    assert rows(run_dir) == [0, 64, 128, 192, 256]  # each evaluation exactly once
+    assert [s for s, _ in checkpoints.list_checkpoints(run_dir)] == [64, 128, 192, 256]
+    assert not list((run_dir / "checkpoints").glob("tmp-*"))
+    cfg = config.load_config(run_dir)
+    template = training.init_params(cfg, config.make_env_for(cfg))
+    for step, path in checkpoints.list_checkpoints(run_dir):
+        assert checkpoints.load_checkpoint(path, template)[0] == step
+        adam = checkpoints.load_optimizer(path, optimizer_state.adam_template(template))
+        # Adam's step count goes on from the checkpoint it resumed: a fresh Adam would restart it.
+        assert int(adam[0].count) == step // 64 * ADAM_STEPS_PER_UPDATE
+
+
+def test_a_restored_adam_continues_as_the_uninterrupted_one():
+    """brax's Adam, built through the recording layer and restored mid-run from what it recorded,
+    takes the same steps as an uninterrupted Adam (the layer loses nothing)."""
+    from brax.training.agents.ppo import train as ppo_train
+
+    grad = lambda p, i: jax.tree.map(lambda x: jax.numpy.sin(x * (i + 1)), p)  # noqa: E731
+    params = {"w": jax.numpy.arange(6.0).reshape(2, 3), "b": jax.numpy.ones(3)}
+
+    def run_adam(recorder, p, start, stop):
+        with optimizer_state.recording(recorder):
+            opt = ppo_train.optax.chain(optax.clip_by_global_norm(1.0), ppo_train.optax.adam(learning_rate=0.1))
+            state = opt.init(p)  # as brax's PPO does: build and initialize inside ppo.train
+        update = jax.jit(opt.update)
+        for i in range(start, stop):
+            updates, state = update(grad(p, i), state)
+            p = optax.apply_updates(p, updates)
+        return p, recorder.latest
+
+    whole, _ = run_adam(optimizer_state.AdamRecorder(updates_per_batch=2), params, 0, 8)
+    half, recorded = run_adam(optimizer_state.AdamRecorder(updates_per_batch=2), params, 0, 4)
+    assert int(recorded[0].count) == 4
+    resumed, _ = run_adam(optimizer_state.AdamRecorder(2, restored=recorded), half, 4, 8)
+    jax.tree.map(np.testing.assert_array_equal, resumed, whole)
+    fresh, _ = run_adam(optimizer_state.AdamRecorder(2), half, 4, 8)  # what brax alone would resume
+    assert not np.allclose(fresh["w"], whole["w"])
