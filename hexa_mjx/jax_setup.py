@@ -67,7 +67,11 @@ def devices_for(cfg) -> int:
     num_envs and batch_size, up to the CPU devices JAX has)."""
     if jax.default_backend() != "cpu":
         return jax.local_device_count()
-    available = jax.local_device_count()
     if cfg.cpu_devices:
         return cfg.cpu_devices
+    return dividing_devices(cfg, jax.local_device_count())
+
+
+def dividing_devices(cfg, available: int) -> int:
+    """The most devices, up to `available`, that divide both num_envs and batch_size."""
     return max(d for d in range(1, available + 1) if cfg.num_envs % d == 0 and cfg.batch_size % d == 0)

@@ -21,7 +21,7 @@ import os
 import socket
 from pathlib import Path
 
-from hexa_mjx import config
+from hexa_mjx import config, jax_setup
 
 RETRIES = 3  # times Ray re-runs a run whose worker died; each retry resumes from the last checkpoint
 GPU_MEMORY_SHARE = 0.9  # of a fractional GPU's share, for JAX's preallocation (its default is 75% of the GPU)
@@ -101,7 +101,7 @@ def cpu_devices(cfg: config.TrainConfig, run_cpus: int, run_gpus: float) -> int:
     """CPU devices a run may split into: the cores Ray gave it (none to split on a GPU)."""
     if run_gpus > 0:
         return cfg.cpu_devices
-    return max(d for d in range(1, run_cpus + 1) if cfg.num_envs % d == 0 and cfg.batch_size % d == 0)
+    return jax_setup.dividing_devices(cfg, run_cpus)
 
 
 # ---------------------------------------------------------------------------

@@ -9,8 +9,8 @@ Not a unit test: it takes about half an hour on a 2-core CPU. Two parts, each sk
    (x1e6), all NaN, all +-inf, or a per-joint mix of those. Counts non-finite observations and
    rewards (the target is none), and the episodes that ended on a non-finite physics state.
 2. **Kills** (`--kills`): a small training run (`--train_args`, by default the fast preset for
-   1M steps) first runs uninterrupted; then the same run is started, killed with SIGKILL after a
-   random delay, and resumed, `--kills` times, then resumed to the end. Each delay is uniform
+   1.5M steps) first runs uninterrupted; then the same run is started, killed with SIGKILL after a
+   random delay, and resumed, until `--kills` kills have landed, then resumed to the end. Each delay is uniform
    between 0 and the uninterrupted run's start-up plus two checkpoint intervals, so a kill lands
    anywhere: compiling, training, evaluating, writing a checkpoint. Checks: every evaluation row
    exactly once, every checkpoint readable, no `tmp-*` left, Adam's step count equal to the
@@ -23,6 +23,7 @@ Writes `<out>/soak.json`; prints a summary. A finished part's run directories ar
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import random
 import shlex
@@ -35,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
-DEFAULT_TRAIN = "--preset fast --num_timesteps 1000000 --num_evals 21 --start_joint_noise 0.1"
+DEFAULT_TRAIN = "--preset fast --num_timesteps 1500000 --num_evals 31 --start_joint_noise 0.1"
 IMPORT_S = 10.0  # train.py's start before its run clock: imports, model compile
 
 
@@ -64,9 +65,9 @@ def soak_actions(env_steps: int, num_envs: int, seed: int, chunk: int = 100) -> 
 
     cfg = config.TrainConfig(randomize=True, push_speed=0.5, start_joint_noise=0.1)
     env = config.make_env_for(cfg)
-    batched = wrappers.wrap_for_training(env, episode_length=cfg.episode_length,
-                                         randomization_fn=randomization.randomization_fn(env))
     keys = jax.random.split(jax.random.PRNGKey(seed), num_envs)
+    models = functools.partial(randomization.randomization_fn(env), rng=jax.random.split(keys[0], num_envs))
+    batched = wrappers.wrap_for_training(env, episode_length=cfg.episode_length, randomization_fn=models)
 
     def run(state, key):
         def body(carry, _):
@@ -81,7 +82,7 @@ def soak_actions(env_steps: int, num_envs: int, seed: int, chunk: int = 100) -> 
 
         zero = jp.zeros((), jp.int32)
         carry, _ = jax.lax.scan(body, (state, key, zero, zero, zero, zero), None, length=chunk)
-        return carry[0], carry[1], np.array(carry[2:])
+        return carry[0], carry[1], jp.stack(carry[2:])
 
     run = jax.jit(run)
     state = jax.jit(batched.reset)(keys)
@@ -135,9 +136,7 @@ def soak_kills(kills: int, train_args: list[str], out: Path, seed: int) -> dict:
 
     rng = random.Random(seed)
     attempts, t0 = [], time.time()
-    for i in range(kills):
-        if finished(killed, train_args):
-            break
+    while sum(a["returncode"] == -signal.SIGKILL for a in attempts) < kills and not finished(killed, train_args):
         resume = (killed / "config.json").is_file()
         proc = subprocess.Popen(train_command(train_args, killed, resume), stdout=subprocess.PIPE,
                                 stderr=subprocess.STDOUT, text=True)
@@ -147,11 +146,11 @@ def soak_kills(kills: int, train_args: list[str], out: Path, seed: int) -> dict:
         except subprocess.TimeoutExpired:
             proc.send_signal(signal.SIGKILL)
             output = proc.communicate()[0]
-        resumed = next((line for line in output.splitlines() if line.startswith(("resuming", "removed"))), "")
+        resumed = [line for line in output.splitlines() if line.startswith(("resuming", "removed", "warning"))]
         attempts.append({"delay_s": round(delay, 1), "returncode": proc.returncode, "log": resumed})
-        step = checkpoints.list_checkpoints(killed)[-1][0] if checkpoints.list_checkpoints(killed) else 0
-        print(f"  kill {i + 1}/{kills}: after {delay:5.1f} s (exit {proc.returncode}); latest checkpoint "
-              f"{step:,}", flush=True)
+        found = checkpoints.list_checkpoints(killed)
+        print(f"  attempt {len(attempts)}: {'killed' if proc.returncode == -signal.SIGKILL else 'finished'} after "
+              f"{delay:5.1f} s; latest checkpoint {found[-1][0] if found else 0:,}", flush=True)
     subprocess.run(train_command(train_args, killed, resume=True), check=True, stdout=subprocess.DEVNULL)
     killed_s = time.time() - t0
 

@@ -157,10 +157,9 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
         if "eval/episode_reward" not in metrics:  # a training batch (brax's log_training_metrics)
             logger.progress(start_step + step, metrics)
             return
-        if step > 0 or start_step not in logged:  # brax evaluates the restored params at its step 0
+        fresh_row = step > 0 or start_step not in logged  # brax evaluates restored params at its step 0
+        if fresh_row:
             logger(start_step + step, metrics)
-            if on_eval:
-                on_eval(logger.last)
         if step == 0:
             faults.point("training-started")
         elif step in pending:
@@ -168,6 +167,8 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
             # the rows past its checkpoint and trains those steps again.
             faults.point("row-written")
             save_checkpoint(run_dir, start_step + step, *pending.pop(step))
+        if fresh_row and on_eval:  # a sweep's scheduler may stop the run here: its checkpoint is saved
+            on_eval(logger.last)
 
     def on_params(step, make_policy, params):
         if step > 0 and main:

@@ -10,7 +10,7 @@ import time
 
 import pytest
 
-from hexa_mjx import config, distributed, experiments, ray_runs
+from hexa_mjx import config, distributed, experiments, jax_setup, ray_runs
 
 from conftest import ROOT
 
@@ -113,26 +113,25 @@ def local_ray(cache_env):
 
 
 def test_a_grid_on_ray_gives_the_sequential_runs_results(trained, tmp_path, local_ray):
-    """Seeds 2 and 3 of the tiny run as a grid on Ray: seed 3 is the `trained` run train.py made,
-    and must give the same evaluations; finished runs are then skipped."""
+    """Seed 3 of the tiny run as a grid on Ray: the `trained` run train.py made, it must give the
+    same evaluations; the finished run is then skipped. (One run: each costs ~45 s of tracing.)"""
     run_dir, _ = trained
     settings = {k: v for k, v in dataclasses.asdict(config.load_config(run_dir)).items()
                 if k not in ("seed", "run_dir", "lr", "num_envs", "num_timesteps", "resume", "reward", "task")}
     # As many devices as train.py gave the run (one per core, dividing its 8 environments).
-    devices = max(d for d in range(1, len(os.sched_getaffinity(0)) + 1) if 8 % d == 0)
+    devices = jax_setup.dividing_devices(config.load_config(run_dir), len(os.sched_getaffinity(0)))
 
     def grid():
         runs = experiments.grid("lr", tmp_path, timesteps=64, seeds=4, num_envs=8, **settings)
-        return [run for run in runs if run.condition == "lr_0.0003" and run.seed >= 2]
+        return [run for run in runs if run.condition == "lr_0.0003" and run.seed == 3]
 
     todo, counts = experiments.plan(grid())
-    assert counts == {"done": 0, "reused": 0, "partial": 0, "new": 2}
+    assert counts == {"done": 0, "reused": 0, "partial": 0, "new": 1}
     ray_runs.run_grid(todo, run_cpus=devices, run_gpus=0)
     drop = lambda row: {k: v for k, v in row.items() if k not in ("walltime_s", "env_steps_per_s")}  # noqa: E731
     on_ray = tmp_path / "lr" / "lr_0.0003-s3"
     assert [drop(r) for r in rows(on_ray)] == [drop(r) for r in rows(run_dir)]
-    assert [r["step"] for r in rows(tmp_path / "lr" / "lr_0.0003-s2")] == [0, 64]
-    assert experiments.plan(grid()) == ([], {"done": 2, "reused": 0, "partial": 0, "new": 0})
+    assert experiments.plan(grid()) == ([], {"done": 1, "reused": 0, "partial": 0, "new": 0})
 
 
 def test_sweep_spaces_are_checked_before_ray_starts(tmp_path):
