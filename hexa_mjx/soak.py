@@ -9,7 +9,7 @@ Not a unit test: it takes about half an hour on a 2-core CPU. Two parts, each sk
    (x1e6), all NaN, all +-inf, or a per-joint mix of those. Counts non-finite observations and
    rewards (the target is none), and the episodes that ended on a non-finite physics state.
 2. **Kills** (`--kills`): a small training run (`--train_args`, by default the fast preset for
-   1.5M steps) first runs uninterrupted; then the same run is started, killed with SIGKILL after a
+   1.97M steps) first runs uninterrupted; then the same run is started, killed with SIGKILL after a
    random delay, and resumed, until `--kills` kills have landed, then resumed to the end. Each delay is uniform
    between 0 and the uninterrupted run's start-up plus two checkpoint intervals, so a kill lands
    anywhere: compiling, training, evaluating, writing a checkpoint. Checks: every evaluation row
@@ -36,7 +36,9 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
-DEFAULT_TRAIN = "--preset fast --num_timesteps 1500000 --num_evals 31 --start_joint_noise 0.1"
+# 30 intervals of 4 updates of 16,384 steps: brax rounds each interval up to whole updates, so a
+# budget on this grid keeps every resumed run's evaluations on the uninterrupted run's steps.
+DEFAULT_TRAIN = "--preset fast --num_timesteps 1966080 --num_evals 31 --start_joint_noise 0.1"
 IMPORT_S = 10.0  # train.py's start before its run clock: imports, model compile
 
 
@@ -157,11 +159,14 @@ def soak_kills(kills: int, train_args: list[str], out: Path, seed: int) -> dict:
     cfg = config.load_config(whole)
     template = training.init_params(cfg, config.make_env_for(cfg))
     adam_template = optimizer_state.adam_template(template)
-    unreadable = []
-    for _, path in checkpoints.list_checkpoints(killed):
+    unreadable, adam_counts_continue = [], True
+    per_update = cfg.update_epochs * cfg.num_minibatches  # Adam steps per PPO update
+    for step, path in checkpoints.list_checkpoints(killed):
         try:
             checkpoints.load_checkpoint(path, template)
-            checkpoints.load_optimizer(path, adam_template)
+            adam = checkpoints.load_optimizer(path, adam_template)
+            # A fresh Adam at any resume would count fewer steps than the updates trained so far.
+            adam_counts_continue &= int(adam[0].count) == step // cfg.steps_per_update * per_update
         except RuntimeError as e:
             unreadable.append(str(e))
     finals = [checkpoints.list_checkpoints(r)[-1][1] for r in (whole, killed)]
@@ -169,11 +174,15 @@ def soak_kills(kills: int, train_args: list[str], out: Path, seed: int) -> dict:
     adam_a, adam_b = (checkpoints.load_optimizer(p, adam_template) for p in finals)
     flat = lambda params: np.concatenate([np.ravel(x) for x in jax.tree.leaves(params[1])])  # noqa: E731
     steps_whole, steps_killed = [r["step"] for r in reference], [r["step"] for r in rows(killed)]
+    saved = [step for step, _ in checkpoints.list_checkpoints(killed)]
     last_a, last_b = reference[-1], rows(killed)[-1]
     return {
         "train_args": train_args, "kills_delivered": sum(a["returncode"] == -signal.SIGKILL for a in attempts),
         "attempts": attempts, "kill_delay_max_s": round(longest, 1),
-        "rows_each_once": steps_killed == steps_whole, "rows": len(steps_killed),
+        # Each evaluation once, one per checkpoint (and step 0), on the uninterrupted run's steps.
+        "rows_each_once": len(set(steps_killed)) == len(steps_killed) and set(steps_killed) == {0, *saved},
+        "same_steps_as_uninterrupted": steps_killed == steps_whole, "rows": len(steps_killed),
+        "adam_counts_continue": adam_counts_continue,
         "checkpoints": len(checkpoints.list_checkpoints(killed)), "unreadable_checkpoints": unreadable,
         "tmp_left": len(list((killed / "checkpoints").glob("tmp-*"))),
         "adam_count": [int(adam_a[0].count), int(adam_b[0].count)],

@@ -147,6 +147,23 @@ def test_train_rejects(argv, message, tmp_path, capsys, nothing_compiles):
     assert seconds < 10 and not run_dir.exists()
 
 
+@pytest.mark.parametrize("kind, message", [("file", "is a file, not a folder"),
+                                           ("unwritable", "cannot write to --run_dir /proc/hexa_mjx_run"),
+                                           ("a run", "already holds a run; pass --resume")])
+def test_train_rejects_a_run_dir(kind, message, tmp_path, capsys, nothing_compiles):
+    run_dir = {"file": tmp_path / "file", "unwritable": Path("/proc/hexa_mjx_run"), "a run": tmp_path / "run"}[kind]
+    if kind == "file":
+        run_dir.write_text("")
+    elif kind == "a run":
+        run_dir.mkdir()
+        (run_dir / "config.json").write_text(json.dumps(dataclasses.asdict(config.TrainConfig(run_dir=str(run_dir)))))
+    before = sorted(tmp_path.rglob("*"))
+    code, _ = run_main(train_script.main, ["--run_dir", str(run_dir)])
+    err = capsys.readouterr().err
+    assert code == 2 and message in err and one_error_line(err), err
+    assert sorted(tmp_path.rglob("*")) == before
+
+
 def test_train_rejects_a_resume_with_other_settings(tmp_path, capsys, nothing_compiles):
     run_dir = tmp_path / "run"
     run_dir.mkdir()

@@ -156,26 +156,7 @@ def test_contact_groups(env):
     assert sum(groups == 2) == sum(groups == 3) == 6
 
 
-def test_train_rejects_bad_input(trained, tmp_path):
-    run_dir, _ = trained
-    proc = run("train.py", "--num_envs", "100", "--run_dir", str(tmp_path / "a"), check=False)
-    assert proc.returncode == 2 and "--num_envs 100 does not fit the batch shape" in proc.stderr
-    proc = run("train.py", "--reward", "sideways", check=False)
-    assert proc.returncode == 2 and "invalid choice: 'sideways'" in proc.stderr
-    proc = run("train.py", "--ablate", "legs", check=False)
-    assert proc.returncode == 2 and "invalid choice: 'legs'" in proc.stderr
-    proc = run("train.py", *TINY, "--run_dir", str(run_dir), check=False)
-    assert proc.returncode == 2 and "already holds a run; pass --resume" in proc.stderr
-    proc = run("train.py", *TINY, *NOISE, "--seed", "4", "--run_dir", str(run_dir), "--resume", check=False)
-    assert proc.returncode == 2 and "holds a different run: seed=3" in proc.stderr
-    proc = run("train.py", *TINY, "--cpu_devices", "3", "--run_dir", str(tmp_path / "b"), check=False)
-    assert proc.returncode == 2 and "3 devices must divide --num_envs (8)" in proc.stderr
-    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
-    (tmp_path / "file").write_text("")
-    proc = run("train.py", *TINY, "--run_dir", str(tmp_path / "file"), check=False)
-    assert proc.returncode == 2 and "is a file, not a folder" in proc.stderr
-    proc = run("train.py", *TINY, "--run_dir", "/proc/hexa_mjx_run", check=False)  # unwritable, even for root
-    assert proc.returncode == 2 and "cannot write to --run_dir /proc/hexa_mjx_run" in proc.stderr
+# train.py's and eval.py's bad input (run dirs, navigation flags among it): tests/test_bad_input.py.
 
 
 @pytest.mark.parametrize("script", [["train.py"], ["eval.py", "--ckpt", "policies/goal"],
@@ -204,25 +185,6 @@ def test_missing_opengl_names_the_package(env, monkeypatch, tmp_path):
     monkeypatch.delenv("MUJOCO_GL", raising=False)
     with pytest.raises(RuntimeError, match="apt-get install libegl1 libegl-mesa0 libosmesa6"):
         video.render_video(env, np.zeros((2, env.mj_model.nq)), tmp_path / "x.mp4", np.zeros((2, 2)))
-
-
-def test_navigation_input_errors_come_before_compiling(trained, tmp_path):
-    run_dir, _ = trained  # a report-task run
-    cases = [
-        (["--waypoints", "1,0 1"], "waypoint '1' is not x,y"),
-        (["--waypoints", ""], "no waypoints"),
-        (["--waypoints", "1,0"], "waypoints need a navigation policy"),
-        (["--task", "navigate", "--goal_min_distance", "3", "--goal_max_distance", "1"], "0 <= min <= max"),
-        (["--task", "navigate", "--goal_min_distance", "-1"], "0 <= min <= max"),
-        (["--task", "fly"], "invalid choice: 'fly'"),
-    ]
-    for flags, message in cases:
-        proc = run("eval.py", "--ckpt", str(run_dir), "--no-video", "--out", str(tmp_path / "o"), *flags, check=False)
-        assert proc.returncode == 2 and message in proc.stderr, (flags, proc.stderr[-500:])
-    assert not (tmp_path / "o").exists()
-    proc = run("train.py", "--task", "navigate", "--reward", "goal_directed", "--run_dir", str(tmp_path / "n"),
-               check=False)
-    assert proc.returncode == 2 and "not one of the navigate task's" in proc.stderr
 
 
 def test_a_policy_runs_only_where_its_observation_exists():
