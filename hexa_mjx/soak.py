@@ -2,22 +2,24 @@
 
     python -m hexa_mjx.soak [--env_steps 10000000] [--kills 20] [--out runs/soak] [--seed 0]
 
-Not a unit test: it takes about half an hour on a 2-core CPU. Two parts, each skippable:
+Not a unit test: about an hour on a 2-core CPU (actions 27 min, kills 30). Two parts, each skippable:
 
 1. **Actions** (`--env_steps`): batched environments (training's wrappers, randomized physics,
    pushes) stepped with actions that are per step and environment, uniform in [-1, 1], huge
    (x1e6), all NaN, all +-inf, or a per-joint mix of those. Counts non-finite observations and
    rewards (the target is none), and the episodes that ended on a non-finite physics state.
 2. **Kills** (`--kills`): a small training run (`--train_args`, by default the fast preset for
-   1.97M steps) first runs uninterrupted; then the same run is started, killed with SIGKILL after a
-   random delay, and resumed, until `--kills` kills have landed, then resumed to the end. Each delay is uniform
-   between 0 and the uninterrupted run's start-up plus two checkpoint intervals, so a kill lands
-   anywhere: compiling, training, evaluating, writing a checkpoint. Checks: every evaluation row
-   exactly once, every checkpoint readable, no `tmp-*` left, Adam's step count equal to the
-   uninterrupted run's; reports the final parameters' and evaluation's difference from the
-   uninterrupted run (the resume gap documented in docs/RESULTS.md, "Reliability").
+   1.97M steps) first runs uninterrupted; then the same run is started in another folder, killed
+   with SIGKILL after a random delay and resumed, until `--kills` kills have landed, then resumed
+   to the end. Each delay is uniform between 0 and the uninterrupted run's time to its second
+   checkpoint (plus imports), so a kill lands anywhere: importing, compiling, training,
+   evaluating, writing a checkpoint. Checks: every evaluation row exactly once and one per
+   checkpoint, every checkpoint readable, no `tmp-*` left, Adam's step count at every checkpoint
+   equal to the updates trained up to it; reports the final parameters' and evaluation's
+   difference from the uninterrupted run (the resume gap, docs/RESULTS.md "Reliability").
 
-Writes `<out>/soak.json`; prints a summary. A finished part's run directories are reused.
+Writes `<out>/soak.json` (a skipped part keeps its earlier figures); prints a summary. A finished
+run directory is reused.
 """
 
 from __future__ import annotations
@@ -215,7 +217,8 @@ def main(argv=None) -> None:
         if any(a in train_args for a in ("--run_dir", "--resume")):
             parser.error("--train_args: leave out --run_dir and --resume (the soak sets them)")
     args.out.mkdir(parents=True, exist_ok=True)
-    report = {}
+    path = args.out / "soak.json"
+    report = json.loads(path.read_text()) if path.is_file() else {}
     if args.env_steps:
         print(f"actions: {args.env_steps:,} env steps on {args.num_envs} environments", flush=True)
         report["actions"] = soak_actions(args.env_steps, args.num_envs, args.seed)
@@ -224,7 +227,6 @@ def main(argv=None) -> None:
         print(f"kills: {args.kills} SIGKILLs of train.py {args.train_args}", flush=True)
         report["kills"] = soak_kills(args.kills, train_args, args.out, args.seed)
         print(json.dumps({k: v for k, v in report["kills"].items() if k != "attempts"}), flush=True)
-    path = args.out / "soak.json"
     path.write_text(json.dumps(report, indent=2))
     print(f"wrote {path}")
 
