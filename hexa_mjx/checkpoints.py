@@ -162,12 +162,14 @@ def load_optimizer(path: Path, template):
     return jax.tree.unflatten(jax.tree.structure(template), leaves)
 
 
-def load_latest(run_dir: Path, template):
-    """(step, params, path) of the newest checkpoint that loads, warning on stderr about each newer
-    one that does not; (0, None, None) when there is none."""
+def load_latest(run_dir: Path, template, optimizer_template=None):
+    """(step, params, optimizer state) of the newest checkpoint that loads, warning on stderr about
+    each newer one that does not; (0, None, None) when there is none. The optimizer state is None
+    without `optimizer_template`, or for a checkpoint saved without one."""
     for _, path in reversed(list_checkpoints(run_dir)):
         try:
-            return (*load_checkpoint(path, template), path)
+            step, params = load_checkpoint(path, template)
+            return step, params, None if optimizer_template is None else load_optimizer(path, optimizer_template)
         except RuntimeError as e:
             print(f"warning: {e}; falling back to the checkpoint before it", file=sys.stderr)
     return 0, None, None

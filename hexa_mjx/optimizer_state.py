@@ -65,13 +65,9 @@ class AdamRecorder:
 
 
 def restore_into(template, restored):
-    """`restored` (a tree of host arrays) as device arrays in `template`'s structure; ValueError when
-    the shapes differ (a checkpoint of other network sizes)."""
-    leaves, treedef = jax.tree.flatten(template)
-    saved = jax.tree.leaves(restored)
-    if len(saved) != len(leaves) or any(np.shape(a) != np.shape(b) for a, b in zip(saved, leaves)):
-        raise ValueError("the checkpoint's optimizer state does not fit this network")
-    return jax.tree.unflatten(treedef, [jp.asarray(a, dtype=b.dtype) for a, b in zip(saved, leaves)])
+    """`restored` (host arrays in `template`'s structure, as checkpoints.load_optimizer checked it)
+    as device arrays of `template`'s dtypes."""
+    return jax.tree.map(lambda saved, fresh: jp.asarray(saved, dtype=fresh.dtype), restored, template)
 
 
 def adam_template(params_template, lr: float = 1e-3):

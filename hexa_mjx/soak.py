@@ -139,8 +139,8 @@ def soak_kills(kills: int, train_args: list[str], out: Path, seed: int) -> dict:
     longest = IMPORT_S + reference[2]["walltime_s"]
 
     rng = random.Random(seed)
-    attempts, t0 = [], time.time()
-    while sum(a["returncode"] == -signal.SIGKILL for a in attempts) < kills and not finished(killed, train_args):
+    attempts, landed, t0 = [], 0, time.time()
+    while landed < kills and not finished(killed, train_args):
         resume = (killed / "config.json").is_file()
         proc = subprocess.Popen(train_command(train_args, killed, resume), stdout=subprocess.PIPE,
                                 stderr=subprocess.STDOUT, text=True)
@@ -152,6 +152,7 @@ def soak_kills(kills: int, train_args: list[str], out: Path, seed: int) -> dict:
             output = proc.communicate()[0]
         resumed = [line for line in output.splitlines() if line.startswith(("resuming", "removed", "warning"))]
         attempts.append({"delay_s": round(delay, 1), "returncode": proc.returncode, "log": resumed})
+        landed += proc.returncode == -signal.SIGKILL
         found = checkpoints.list_checkpoints(killed)
         print(f"  attempt {len(attempts)}: {'killed' if proc.returncode == -signal.SIGKILL else 'finished'} after "
               f"{delay:5.1f} s; latest checkpoint {found[-1][0] if found else 0:,}", flush=True)
@@ -163,7 +164,8 @@ def soak_kills(kills: int, train_args: list[str], out: Path, seed: int) -> dict:
     adam_template = optimizer_state.adam_template(template)
     unreadable, adam_counts_continue = [], True
     per_update = cfg.update_epochs * cfg.num_minibatches  # Adam steps per PPO update
-    for step, path in checkpoints.list_checkpoints(killed):
+    saved = checkpoints.list_checkpoints(killed)
+    for step, path in saved:
         try:
             checkpoints.load_checkpoint(path, template)
             adam = checkpoints.load_optimizer(path, adam_template)
@@ -171,21 +173,21 @@ def soak_kills(kills: int, train_args: list[str], out: Path, seed: int) -> dict:
             adam_counts_continue &= int(adam[0].count) == step // cfg.steps_per_update * per_update
         except RuntimeError as e:
             unreadable.append(str(e))
-    finals = [checkpoints.list_checkpoints(r)[-1][1] for r in (whole, killed)]
+    finals = [checkpoints.list_checkpoints(whole)[-1][1], saved[-1][1]]
     (_, a), (_, b) = (checkpoints.load_checkpoint(p, template) for p in finals)
     adam_a, adam_b = (checkpoints.load_optimizer(p, adam_template) for p in finals)
     flat = lambda params: np.concatenate([np.ravel(x) for x in jax.tree.leaves(params[1])])  # noqa: E731
-    steps_whole, steps_killed = [r["step"] for r in reference], [r["step"] for r in rows(killed)]
-    saved = [step for step, _ in checkpoints.list_checkpoints(killed)]
-    last_a, last_b = reference[-1], rows(killed)[-1]
+    killed_rows = rows(killed)
+    steps_whole, steps_killed = [r["step"] for r in reference], [r["step"] for r in killed_rows]
+    last_a, last_b = reference[-1], killed_rows[-1]
     return {
-        "train_args": train_args, "kills_delivered": sum(a["returncode"] == -signal.SIGKILL for a in attempts),
+        "train_args": train_args, "kills_delivered": landed,
         "attempts": attempts, "kill_delay_max_s": round(longest, 1),
         # Each evaluation once, one per checkpoint (and step 0), on the uninterrupted run's steps.
-        "rows_each_once": len(set(steps_killed)) == len(steps_killed) and set(steps_killed) == {0, *saved},
+        "rows_each_once": len(set(steps_killed)) == len(steps_killed) and set(steps_killed) == {0, *(s for s, _ in saved)},
         "same_steps_as_uninterrupted": steps_killed == steps_whole, "rows": len(steps_killed),
         "adam_counts_continue": adam_counts_continue,
-        "checkpoints": len(checkpoints.list_checkpoints(killed)), "unreadable_checkpoints": unreadable,
+        "checkpoints": len(saved), "unreadable_checkpoints": unreadable,
         "tmp_left": len(list((killed / "checkpoints").glob("tmp-*"))),
         "adam_count": [int(adam_a[0].count), int(adam_b[0].count)],
         "policy_param_relative_difference": float(np.linalg.norm(flat(a) - flat(b)) / np.linalg.norm(flat(a))),

@@ -19,8 +19,7 @@ import jax.numpy as jp
 from flax import linen
 
 from hexa_mjx import distributed, faults, randomization
-from hexa_mjx.checkpoints import (checkpoint_dir, list_checkpoints, load_latest, load_optimizer, remove_temporaries,
-                                  save_checkpoint)
+from hexa_mjx.checkpoints import checkpoint_dir, list_checkpoints, load_latest, remove_temporaries, save_checkpoint
 from hexa_mjx.config import TrainConfig, make_env_for, validate
 from hexa_mjx.jax_setup import devices_for, prepare_jax
 from hexa_mjx.optimizer_state import AdamRecorder, adam_template, recording
@@ -103,11 +102,10 @@ def resume_point(cfg: TrainConfig, run_dir: Path, template, optimizer_template) 
     if not list_checkpoints(run_dir):
         print(f"{run_dir} has no complete checkpoint yet (it stopped before its first): starting again from step 0")
         return 0, None, None
-    start_step, restore, path = load_latest(run_dir, template)
+    start_step, restore, optimizer = load_latest(run_dir, template, optimizer_template)
     if restore is None:
         print(f"{run_dir} has no readable checkpoint: starting again from step 0")
         return 0, None, None
-    optimizer = load_optimizer(path, optimizer_template)
     print(f"resuming {run_dir} from step {start_step:,}"
           + ("" if optimizer is not None else " (its checkpoint has no optimizer state: Adam starts afresh)"))
     return start_step, restore, optimizer
@@ -129,7 +127,7 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
     if main:
         start_step, restore, optimizer = resume_point(cfg, run_dir, template, optimizer_template)
         # One row per evaluation: rows past the checkpoint go, and the checkpoint's own evaluation is
-        # logged again only if a crash came between saving it and writing its row.
+        # logged again only if its row is missing (a run from before rows were written first).
         logged = keep_rows_up_to(run_dir, start_step)
         tmp = run_dir / "config.json.tmp"
         tmp.write_text(json.dumps(dataclasses.asdict(cfg), indent=2))

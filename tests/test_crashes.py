@@ -2,7 +2,6 @@
 evaluation row exactly once, every checkpoint readable, no temporary folder left, and Adam's state
 carried across (the last resume runs on 2 processes: process 0 reads and shares it)."""
 
-import json
 import signal
 
 import jax
@@ -12,7 +11,7 @@ import optax
 from hexa_mjx import checkpoints, config, faults, optimizer_state, training
 
 from conftest import NOISE, TINY, run
-from test_scale_out import free_port, process_flags, train_processes
+from test_scale_out import free_port, process_flags, rows as metric_rows, train_processes
 
 # The shared tiny run's settings (8 envs, 64 env steps and 10 epochs x 2 minibatches per update),
 # with an evaluation and a checkpoint every 64 steps.
@@ -21,7 +20,7 @@ ADAM_STEPS_PER_UPDATE = 10 * 2
 
 
 def rows(run_dir):
-    return [json.loads(line)["step"] for line in (run_dir / "metrics.jsonl").read_text().splitlines()]
+    return [row["step"] for row in metric_rows(run_dir)]
 
 
 def killed_at(point, run_dir, cache_env, resume=True):
