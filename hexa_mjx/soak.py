@@ -2,7 +2,8 @@
 
     python -m hexa_mjx.soak [--env_steps 10000000] [--kills 20] [--out runs/soak] [--seed 0]
 
-Not a unit test: about an hour on a 2-core CPU (actions 27 min, kills 30). Two parts, each skippable:
+Not a unit test: about an hour on a 2-core CPU (runs/soak took 27 min for the actions, 33 for the
+kills). Two parts, each skippable:
 
 1. **Actions** (`--env_steps`): batched environments (training's wrappers, randomized physics,
    pushes) stepped with actions that are per step and environment, uniform in [-1, 1], huge
