@@ -77,6 +77,9 @@ class TrainConfig:
         "help": "navigate: m, nearest goal distance drawn"})
     goal_max_distance: float = dataclasses.field(default=3.0, metadata={
         "help": "navigate: m, farthest goal distance drawn"})
+    curriculum_levels: int = dataclasses.field(default=0, metadata={
+        "help": "navigate: a curriculum of this many levels (0: none); each environment's goals start near and "
+                "ahead, and the bearing and distance ranges open as it reaches goals (hexa_mjx.curriculum)"})
     leg_failure: str = dataclasses.field(default="none", metadata={
         "help": "'random': each episode one random leg's servos fail (with --leg_failure_rate); the policy is "
                 "not told which", "choices": ["none", "random"]})
@@ -228,7 +231,7 @@ def validate(cfg: TrainConfig, writes: bool = True) -> TrainConfig:
     if cfg.model and not Path(cfg.model).is_file():
         raise ConfigError(f"--model {cfg.model} is not a file; convert a URDF with "
                           f"`python -m hexa_mjx.convert URDF -o {cfg.model}`")
-    make_env_for(cfg)  # a bad ctrl_hz, task or reward raises here, before compiling
+    make_env_for(cfg, curriculum_levels=cfg.curriculum_levels)  # a bad ctrl_hz, task or reward raises here
     if writes:
         check_run_dir(cfg, run_dir)
     return cfg

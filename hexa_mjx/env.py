@@ -31,7 +31,7 @@ with contextlib.redirect_stdout(io.StringIO()):
     from brax.envs.base import Env, State
     from mujoco import mjx
 
-from hexa_mjx import rewards  # noqa: E402
+from hexa_mjx import curriculum, rewards  # noqa: E402
 from hexa_mjx.env_config import EnvConfig, check_config, push_steps  # noqa: E402
 from hexa_mjx.kinematics import fell as flipped, quat_mul  # noqa: E402
 from hexa_mjx.model import RobotModel, action_to_ctrl, failed_ctrl, servo_power  # noqa: E402
@@ -54,8 +54,8 @@ class HexapodEnv(Env):
     rewards: tuple[str, ...] = ()  # the task's reward variants, its default first
 
     def __init__(self, config: EnvConfig = EnvConfig()):
-        check_config(config)
         config = dataclasses.replace(config, task=self.name, reward=config.reward or self.rewards[0])
+        check_config(config)
         if config.reward not in rewards.VARIANTS:
             raise ValueError(f"unknown reward {config.reward!r}; the {self.name} task's are {list(self.rewards)}")
         if config.reward not in self.rewards:
@@ -114,6 +114,7 @@ class HexapodEnv(Env):
         metrics.update(distance=self.goal_distance(data), success=zero, fell=zero, nonfinite=zero, goal_bonus=zero,
                        goals_reached=zero, final_distance=zero, final_success=zero)
         info = {"rng": rng, "t": jp.zeros((), jp.int32), "success": zero, "goals": jp.zeros((), jp.int32),
+                "level": jp.zeros((), jp.int32),  # the curriculum's level (hexa_mjx.curriculum), kept across episodes
                 "failed_legs": self.draw_failure(jax.random.fold_in(rng, 3)),
                 "latency": self.draw_latency(jax.random.fold_in(rng, 4))}
         return State(data, self.noisy(self.observe(data), jax.random.fold_in(rng, 5)), zero, zero, metrics, info)
@@ -165,10 +166,13 @@ class HexapodEnv(Env):
         over = done | (t >= self.config.episode_length)
         rng, key = jax.random.split(state.info["rng"])
         goals = state.info["goals"] + completed
-        data = self.set_goal(data, jp.where(completed, self.next_goal(data, goals, key), self.goal(data)))
+        level = state.info["level"]
+        if self.config.curriculum_levels:
+            level = curriculum.next_level(level, self.config.curriculum_levels, completed, over, done | (goals == 0))
+        data = self.set_goal(data, jp.where(completed, self.next_goal(data, goals, key, level), self.goal(data)))
         success = jp.maximum(state.info["success"], reached.astype(jp.float32))
         info = {**state.info, "rng": rng, "t": jp.where(over, 0, t), "success": jp.where(over, 0.0, success),
-                "goals": jp.where(over, 0, goals),
+                "goals": jp.where(over, 0, goals), "level": level,
                 "failed_legs": jp.where(over, self.draw_failure(jax.random.fold_in(key, 3)), state.info["failed_legs"]),
                 "latency": jp.where(over, self.draw_latency(jax.random.fold_in(key, 4)), state.info["latency"])}
         # Start from the incoming metrics: wrappers (brax's evaluator) add keys of their own.
@@ -217,8 +221,9 @@ class HexapodEnv(Env):
         fails = jax.random.uniform(k_whether) < self.config.leg_failure_rate
         return jax.nn.one_hot(jax.random.randint(k_which, (), 0, legs), legs) * fails
 
-    def restart(self, data: mjx.Data, rng: jax.Array) -> mjx.Data:
-        """`data` with a fresh start state (qpos, qvel, ctrl, time) and first goal drawn with `rng`.
+    def restart(self, data: mjx.Data, rng: jax.Array, level=0) -> mjx.Data:
+        """`data` with a fresh start state (qpos, qvel, ctrl, time) and first goal drawn with `rng`
+        (at the curriculum's `level`).
 
         Quantities derived from the state (positions, contacts) are left as they are: the next
         `mjx.step` recomputes them from qpos and qvel, and the observation needs only those.
@@ -232,7 +237,7 @@ class HexapodEnv(Env):
             quat = quat_mul(jp.array([jp.cos(half_yaw), 0.0, 0.0, jp.sin(half_yaw)]), qpos[3:7])
             qpos = jp.concatenate([qpos[:3], quat, jp.clip(joints, self.robot.joint_lo, self.robot.joint_hi)])
         data = data.replace(qpos=qpos, qvel=self._qvel0, ctrl=self._ctrl0, time=jp.zeros_like(data.time))
-        return self.set_goal(data, self.first_goal(qpos, jax.random.fold_in(rng, 2)))
+        return self.set_goal(data, self.first_goal(qpos, jax.random.fold_in(rng, 2), level))
 
     def goal(self, data: mjx.Data) -> jax.Array:
         """The current goal's (x, y), m, world frame."""
@@ -275,8 +280,8 @@ class HexapodEnv(Env):
         """The policy's observation of a physics state (reads only qpos, qvel, ctrl and the goal)."""
         raise NotImplementedError
 
-    def first_goal(self, qpos: jax.Array, rng: jax.Array) -> jax.Array:
-        """The goal (x, y) of an episode starting at `qpos`."""
+    def first_goal(self, qpos: jax.Array, rng: jax.Array, level=0) -> jax.Array:
+        """The goal (x, y) of an episode starting at `qpos`, at the curriculum's `level` if it has one."""
         raise NotImplementedError
 
     def goal_completed(self, reached: jax.Array, goals: jax.Array) -> jax.Array:
@@ -284,7 +289,7 @@ class HexapodEnv(Env):
         and `goals` goals were completed earlier in the episode. Default: goals are never replaced."""
         return jp.zeros((), bool)
 
-    def next_goal(self, data: mjx.Data, goals: jax.Array, rng: jax.Array) -> jax.Array:
+    def next_goal(self, data: mjx.Data, goals: jax.Array, rng: jax.Array, level=0) -> jax.Array:
         """The goal (x, y) that follows `goals` completed goals, from the state that completed the last."""
         return self.goal(data)
 

@@ -48,6 +48,9 @@ class EnvConfig:
     # Navigation: the observed distance is capped here (0: goal_max_distance). A policy keeps the
     # cap it was trained with when evaluated on another range.
     goal_distance_cap: float = 0.0  # m
+    # Navigation, training only: a curriculum of this many levels (0: none) that opens the bearing
+    # and distance ranges per environment as it reaches goals (hexa_mjx.curriculum).
+    curriculum_levels: int = 0
     # Navigation: a fixed path instead of random goals, ((x, y), ...) in metres, world frame,
     # relative to the start position. The last waypoint stays the goal once reached.
     waypoints: tuple = ()
@@ -135,6 +138,11 @@ def check_config(config: EnvConfig) -> None:
             raise ValueError(f"disabled_legs are leg numbers from 1, got {list(config.disabled_legs)}")
     if len(set(config.disabled_legs)) != len(config.disabled_legs):
         raise ValueError(f"disabled_legs names a leg twice: {list(config.disabled_legs)}")
+    if not (isinstance(config.curriculum_levels, int) and 0 <= config.curriculum_levels <= 100):
+        raise ValueError(f"curriculum_levels is a whole number of levels from 0 (no curriculum) to 100, "
+                         f"got {config.curriculum_levels}")
+    if config.curriculum_levels and (config.task != "navigate" or config.waypoints):
+        raise ValueError("curriculum_levels applies to the navigate task's random goals only; leave it at 0")
     for point in config.waypoints:
         if len(point) != 2 or not all(math.isfinite(float(c)) for c in point):
             raise ValueError(f"a waypoint is a pair of finite coordinates x,y in metres, got {point}")

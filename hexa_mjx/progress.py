@@ -97,7 +97,7 @@ class Logger:
         done = step - self.start_step
         rate = done / elapsed if done > 0 and elapsed > 0 else math.nan
         row = {"step": step, "walltime_s": round(elapsed, 2), "env_steps_per_s": rate, **summarize(metrics),
-               **{k: float(v) for k, v in metrics.items() if k.startswith("eval/episode_reward/")}}
+               **{k: float(v) for k, v in metrics.items() if k.startswith(("eval/episode_reward/", "curriculum/"))}}
         with open(self.path, "a") as f:
             f.write(json.dumps(row) + "\n")
         for key, value in row.items():
@@ -116,7 +116,9 @@ class Logger:
         print(f"step {step:>9,}/{self.cfg.num_timesteps:,}  {rate:7.0f} steps/s  left {fmt_time(left)}  "
               f"return {row['episode_return']:8.1f}  distance {row['final_distance']:.2f} m  "
               f"success {row['success_rate']:.0%}  {task_figure}  falls {row['fall_rate']:.0%}"
-              + (f"  non-finite {row['nonfinite_rate']:.0%}" if row["nonfinite_rate"] > 0 else ""), flush=True)
+              + (f"  non-finite {row['nonfinite_rate']:.0%}" if row["nonfinite_rate"] > 0 else "")
+              + (f"  curriculum level {row['curriculum/level_mean']:.1f} (top {row['curriculum/top_level_share']:.0%})"
+                 if "curriculum/level_mean" in row else ""), flush=True)
         self.last = row
 
     def close(self):

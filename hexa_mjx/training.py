@@ -19,6 +19,7 @@ import jax.numpy as jp
 from flax import linen
 
 from hexa_mjx import distributed, faults, randomization
+from hexa_mjx.curriculum import LevelHistogram
 from hexa_mjx.checkpoints import checkpoint_dir, list_checkpoints, load_latest, remove_temporaries, save_checkpoint
 from hexa_mjx.config import TrainConfig, make_env_for, validate
 from hexa_mjx.jax_setup import devices_for, prepare_jax
@@ -84,11 +85,13 @@ def evals_for(cfg: TrainConfig, remaining: int) -> int:
     return 1 + max(1, math.ceil((cfg.num_evals - 1) * remaining / cfg.num_timesteps))
 
 
-def wrap_env_fn(env, randomized: bool = False):
-    """brax's training wrappers, or ours that redraw the start state (and first goal) every episode
-    and give each environment its own randomized model."""
+def wrap_env_fn(env, randomized: bool = False, level_record=None):
+    """brax's training wrappers, or ours that redraw the start state (and first goal) every episode,
+    give each environment its own randomized model, and report curriculum levels to `level_record`."""
     from hexa_mjx import wrappers
 
+    if level_record is not None:
+        return functools.partial(wrappers.wrap_for_training, level_record=level_record)
     return wrappers.wrap_for_training if env.fresh_starts or randomized else None
 
 
@@ -120,7 +123,9 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
     main = distributed.is_main()  # process 0 (or the only one) reads and writes the run directory
     cfg = validate(cfg, writes=main)
     run_dir = Path(cfg.run_dir)
-    env = make_env_for(cfg)
+    # The curriculum shapes the training environment only: evaluations see the full task.
+    env = make_env_for(cfg, curriculum_levels=cfg.curriculum_levels)
+    eval_env = make_env_for(cfg) if cfg.curriculum_levels else env
     template = init_params(cfg, env)
     optimizer_template = adam_template(template)
     start_step, restore, optimizer, logged = 0, None, None, set()
@@ -146,6 +151,8 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
         return {}
 
     logger = Logger(run_dir, cfg, start_step) if main else None
+    # Where the curriculum's environments are, for each evaluation row (levels restart at 0 on resume).
+    levels = LevelHistogram(cfg.curriculum_levels, devices_for(cfg)) if cfg.curriculum_levels else None
 
     pending = {}  # the checkpoint brax handed over, saved once its evaluation row is written
 
@@ -157,7 +164,7 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
             return
         fresh_row = step > 0 or start_step not in logged  # brax evaluates restored params at its step 0
         if fresh_row:
-            logger(start_step + step, metrics)
+            logger(start_step + step, {**metrics, **(levels.summary() if levels else {})})
         if step == 0:
             faults.point("training-started")
         elif step in pending:
@@ -182,8 +189,9 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
         logger.compiling()
     randomization_fn = randomization.randomization_fn(env) if cfg.randomize else None
     with recording(recorder):
-        ppo.train(environment=env, num_timesteps=remaining, **ppo_settings(cfg), seed=cfg.seed + start_step,
-                  max_devices_per_host=devices, wrap_env_fn=wrap_env_fn(env, cfg.randomize),
+        ppo.train(environment=env, eval_env=eval_env, num_timesteps=remaining, **ppo_settings(cfg),
+                  seed=cfg.seed + start_step, max_devices_per_host=devices,
+                  wrap_env_fn=wrap_env_fn(env, cfg.randomize, levels),
                   randomization_fn=randomization_fn,
                   num_evals=evals_for(cfg, remaining), num_eval_envs=cfg.num_eval_envs, deterministic_eval=True,
                   progress_fn=on_progress, policy_params_fn=on_params, restore_params=restore,

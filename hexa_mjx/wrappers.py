@@ -15,6 +15,8 @@ import jax.numpy as jp
 from brax.envs.base import State, Wrapper
 from brax.envs.wrappers import training as brax_training
 
+from hexa_mjx.curriculum import LevelTap
+
 
 def _where_done(done, new, old):
     return jp.where(done.reshape(done.shape + (1,) * (new.ndim - done.ndim)), new, old)
@@ -36,7 +38,9 @@ class FreshStartAutoReset(Wrapper):
         state = self.env.step(state.replace(done=jp.zeros_like(state.done)), action)
         base = self.env.unwrapped
         keys = jax.vmap(jax.random.split)(state.info["restart_rng"])
-        fresh = jax.vmap(base.restart)(state.info["first_pipeline_state"], keys[:, 1])
+        # An environment with a curriculum restarts at its level (hexa_mjx.curriculum).
+        level = (state.info["level"],) if "level" in state.info else ()
+        fresh = jax.vmap(base.restart)(state.info["first_pipeline_state"], keys[:, 1], *level)
         pipeline_state = jax.tree.map(lambda new, old: _where_done(state.done, new, old), fresh,
                                       state.pipeline_state)
         obs = _where_done(state.done, jax.vmap(base.observe)(fresh), state.obs)
@@ -69,9 +73,13 @@ class RandomizedVmap(Wrapper):
             self._models, state, action)
 
 
-def wrap_for_training(env, episode_length: int = 1000, action_repeat: int = 1, randomization_fn=None):
+def wrap_for_training(env, episode_length: int = 1000, action_repeat: int = 1, randomization_fn=None,
+                      level_record=None):
     """brax's `envs.training.wrap` with `FreshStartAutoReset` in place of its AutoResetWrapper and
-    `RandomizedVmap` in place of its VmapWrapper when there is a `randomization_fn`."""
+    `RandomizedVmap` in place of its VmapWrapper when there is a `randomization_fn`; with a
+    curriculum and a `level_record` callback, `curriculum.LevelTap` reports the levels to it."""
     env = RandomizedVmap(env, randomization_fn) if randomization_fn else brax_training.VmapWrapper(env)
     env = brax_training.EpisodeWrapper(env, episode_length, action_repeat)
-    return FreshStartAutoReset(env)
+    env = FreshStartAutoReset(env)
+    levels = getattr(env.unwrapped, "config", None) and env.unwrapped.config.curriculum_levels
+    return LevelTap(env, levels, level_record) if levels and level_record else env

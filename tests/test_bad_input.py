@@ -56,6 +56,8 @@ TRAIN_CASES = [
     (["--task", "fly"], "invalid choice: 'fly'"),
     (["--task", "navigate", "--reward", "goal_directed"], "not one of the navigate task's"),
     (["--task", "navigate", "--goal_min_distance", "3", "--goal_max_distance", "1"], "0 <= min <= max"),
+    (["--curriculum_levels", "4"], "curriculum_levels applies to the navigate task"),
+    (["--task", "navigate", "--curriculum_levels", "-1"], "curriculum_levels is a whole number of levels"),
     (["--start_yaw_noise", "-1"], "start_yaw_noise is a range in radians from 0 to pi"),
     (["--leg_failure_rate", "2"], "leg_failure_rate is a probability in [0, 1]"),
     (["--push_speed", "-1"], "push_speed is a speed in m/s"),

@@ -17,8 +17,10 @@ def _yaw_quat(angle):
 def test_sizes_and_reward_table(nav_env):
     assert (nav_env.observation_size, nav_env.action_size) == (67, 18)
     assert nav_env.config.reward == "navigate" and nav_env.scales["goal_reached"] > 0
-    for term in ("stability", "height", "energy", "contact_quality", "body_contact", "termination"):
-        assert nav_env.scales[term] == rewards.VARIANTS["goal_directed"][term]  # shaping shared with the report
+    report = rewards.VARIANTS["goal_directed"]
+    for term in ("stability", "height", "energy", "contact_quality", "termination"):
+        assert nav_env.scales[term] == report[term]  # shaping shared with the report
+    assert nav_env.scales["body_contact"] < report["body_contact"] < 0  # the same term, weighted more
 
 
 def test_goals_and_headings_cover_every_direction(nav_env, nav_reset):

@@ -57,7 +57,7 @@ def test_variants_differ_only_in_task_terms():
     goal, forward = rewards.VARIANTS["goal_directed"], rewards.VARIANTS["forward_motion"]
     assert set(goal) == set(forward) == set(rewards.VARIANTS["navigate"]) == set(rewards.TERMS)
     navigate = rewards.VARIANTS["navigate"]
-    assert {k for k in goal if goal[k] != navigate[k]} == {"goal_reached"}  # navigation adds one term
+    assert {k for k in goal if goal[k] != navigate[k]} == {"goal_reached", "body_contact"}
     differing = {k for k in goal if goal[k] != forward[k]}
     assert differing == {"goal_approach", "velocity_alignment", "goal_bonus", "forward_progress", "forward_velocity"}
     assert forward["goal_bonus"] == 0.0

@@ -17,7 +17,7 @@ class GoalEnv(HexapodEnv):
     name = "goal"
     rewards = TASK_REWARDS["goal"]
 
-    def first_goal(self, qpos: jax.Array, rng: jax.Array) -> jax.Array:
+    def first_goal(self, qpos: jax.Array, rng: jax.Array, level=0) -> jax.Array:
         return self._start_xy + jp.array([self.config.goal_distance, 0.0])
 
     def observe(self, data: mjx.Data) -> jax.Array:

@@ -1,0 +1,83 @@
+"""The navigation curriculum: the level rule, goal ranges per level, levels kept across episodes
+and reported to the host."""
+
+import jax
+import jax.numpy as jp
+import numpy as np
+import pytest
+
+import hexa_mjx
+from hexa_mjx import config, curriculum, nav_metrics, wrappers
+
+LEVELS = 4
+
+
+def test_level_rule():
+    up = curriculum.next_level(jp.int32(1), LEVELS, jp.bool_(True), jp.bool_(False), jp.bool_(False))
+    top = curriculum.next_level(jp.int32(LEVELS - 1), LEVELS, jp.bool_(True), jp.bool_(False), jp.bool_(False))
+    down = curriculum.next_level(jp.int32(2), LEVELS, jp.bool_(False), jp.bool_(True), jp.bool_(True))
+    bottom = curriculum.next_level(jp.int32(0), LEVELS, jp.bool_(False), jp.bool_(True), jp.bool_(True))
+    kept = curriculum.next_level(jp.int32(2), LEVELS, jp.bool_(False), jp.bool_(True), jp.bool_(False))
+    mid_episode = curriculum.next_level(jp.int32(2), LEVELS, jp.bool_(False), jp.bool_(False), jp.bool_(True))
+    assert [int(x) for x in (up, top, down, bottom, kept, mid_episode)] == [2, LEVELS - 1, 1, 0, 2, 2]
+
+
+@pytest.fixture(scope="module")
+def cur_env():
+    return hexa_mjx.make_env(task="navigate", curriculum_levels=LEVELS, episode_length=10)
+
+
+def _bearings_and_distances(env, qpos, level, n=2000):
+    draw = jax.jit(jax.vmap(env.first_goal, in_axes=(None, 0, None)))
+    goals = np.asarray(draw(qpos, jax.random.split(jax.random.PRNGKey(0), n), jp.int32(level)))
+    offset = goals - np.asarray(qpos[:2])
+    heading = float(np.degrees(nav_metrics.heading(np.asarray(qpos)[None]))[0])
+    bearing = nav_metrics.wrap_deg(np.degrees(np.arctan2(offset[:, 1], offset[:, 0])) - heading)
+    return bearing, np.linalg.norm(offset, axis=1)
+
+
+def test_goal_ranges_open_with_the_level(cur_env):
+    turn = 2.0  # rad: the bearings are measured from the torso's heading, not from +x
+    qpos = jp.asarray(cur_env.qpos0).at[3:7].set(jp.array([np.cos(turn / 2), 0.0, 0.0, np.sin(turn / 2)]))
+    bearing, dist = _bearings_and_distances(cur_env, qpos, 0)
+    assert np.abs(bearing).max() <= 45 + 1e-3 and np.abs(bearing).max() > 40  # +-180 x 1/4
+    assert dist.min() >= 0.5 - 1e-5 and 1.1 < dist.max() <= 0.5 + 2.5 / 4 + 1e-5
+    bearing, dist = _bearings_and_distances(cur_env, qpos, LEVELS - 1)  # the top level: the whole task
+    assert np.histogram(bearing, bins=8, range=(-180, 180))[0].min() > 150  # 250 expected per sector
+    assert dist.max() > 2.9
+
+
+def test_training_environments_keep_their_level_and_report_it(cur_env):
+    histogram = curriculum.LevelHistogram(LEVELS, devices=1)
+    env = curriculum.LevelTap(wrappers.wrap_for_training(cur_env, episode_length=10), LEVELS, histogram, every=5)
+    step = jax.jit(env.step)
+    state = jax.jit(env.reset)(jax.random.split(jax.random.PRNGKey(1), 3))
+    on_torso = jax.vmap(lambda d: cur_env.set_goal(d, d.qpos[:2]))(state.pipeline_state)
+    state = step(state.replace(pipeline_state=on_torso), jp.zeros((3, 18)))  # every goal reached: level 1
+    np.testing.assert_array_equal(state.info["level"], [1, 1, 1])
+    for _ in range(4):
+        state = step(state, jp.zeros((3, 18)))
+    assert histogram.summary()["curriculum/level_1"] == 1.0  # the snapshot after step 5
+    for _ in range(5):  # the first episode ends with its goal reached: the level stays
+        state = step(state, jp.zeros((3, 18)))
+    np.testing.assert_array_equal(state.info["level"], [1, 1, 1])
+    offset = jax.vmap(cur_env.goal)(state.pipeline_state) - state.pipeline_state.qpos[:, :2]
+    assert np.linalg.norm(offset, axis=1).max() <= 0.5 + 2.5 * 2 / LEVELS + 1e-5  # restarted at level 1
+    for _ in range(10):  # standing still, the second episode reaches no goal: down a level
+        state = step(state, jp.zeros((3, 18)))
+    np.testing.assert_array_equal(state.info["level"], [0, 0, 0])
+    summary = histogram.summary()
+    assert summary["curriculum/level_0"] == 1.0 and summary["curriculum/level_mean"] == 0.0
+
+
+def test_only_random_navigation_goals_have_a_curriculum():
+    with pytest.raises(ValueError, match="navigate task's random goals only"):
+        hexa_mjx.make_env(task="goal", curriculum_levels=LEVELS)
+    with pytest.raises(ValueError, match="navigate task's random goals only"):
+        hexa_mjx.make_env(task="navigate", curriculum_levels=LEVELS, waypoints=[(1, 0)])
+
+
+def test_evaluation_sees_the_full_task():
+    cfg = config.parse_args(["--task", "navigate", "--curriculum_levels", str(LEVELS)])
+    assert cfg.curriculum_levels == LEVELS
+    assert config.make_env_for(cfg).config.curriculum_levels == 0  # eval.py's and training's evaluations
