@@ -96,6 +96,22 @@ def summary_line(name: str, results: list[dict]) -> str:
             f"time to the first update {fmt(compiles, lambda x: f'{x:.0f} s')}")
 
 
+def report_runs(run_dirs: list[Path], target: float) -> int:
+    """Print each finished run's first evaluation at or above `target` and its whole run."""
+    for run_dir in run_dirs:
+        metrics = run_dir / "metrics.jsonl"
+        if not metrics.is_file():
+            print(f"error: {metrics} not found: is {run_dir} a train.py run directory?", file=sys.stderr)
+            return 2
+        rows = [json.loads(x) for x in metrics.read_text().splitlines() if x.strip()]
+        hit = first_success(metrics, target)
+        got = f"{hit[1] / 60:.1f} min, {hit[0]:,} steps" if hit else "not reached"
+        print(f"{run_dir}: success >= {target:.1%} at {got}; run {rows[-1]['step']:,} steps in "
+              f"{rows[-1]['walltime_s'] / 60:.1f} min; last evaluation success {rows[-1]['success_rate']:.0%}, "
+              f"falls {rows[-1]['fall_rate']:.0%}")
+    return 0
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m hexa_mjx.time_to_success", description=__doc__.split("\n\n")[0])
     parser.add_argument("--configs", nargs="+", default=["default", "fast"],
@@ -108,7 +124,11 @@ def main(argv=None) -> int:
     parser.add_argument("--full", action="store_true", help="let every run finish its budget")
     parser.add_argument("--timeout_min", type=float, default=60.0, help="stop a run after this long (default: 60)")
     parser.add_argument("--out", default="runs/time_to_success", help="folder for the runs and the JSON")
+    parser.add_argument("--runs", nargs="+", type=Path, default=None,
+                        help="instead of training: read these finished run directories and print the same figures")
     args = parser.parse_args(argv)
+    if args.runs:
+        return report_runs(args.runs, args.target)
     configs = [parse_config(c) for c in args.configs]
     out = Path(args.out)
     if out.exists() and any(out.iterdir()):

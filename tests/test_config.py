@@ -40,6 +40,17 @@ def test_time_to_success_reads_the_first_good_evaluation(tmp_path):
     assert time_to_success.first_success(tmp_path / "none.jsonl", 0.9) is None
 
 
+def test_time_to_success_reports_finished_runs(tmp_path, capsys):
+    run = tmp_path / "run-s0"
+    run.mkdir()
+    rows = [{"step": 0, "walltime_s": 60.0, "success_rate": 0.0, "fall_rate": 0.5},
+            {"step": 500, "walltime_s": 120.0, "success_rate": 0.9, "fall_rate": 0.25}]
+    (run / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    assert time_to_success.main(["--runs", str(run), "--target", "0.855"]) == 0
+    assert "success >= 85.5% at 2.0 min, 500 steps; run 500 steps in 2.0 min" in capsys.readouterr().out
+    assert time_to_success.main(["--runs", str(tmp_path / "nothing")]) == 2
+
+
 def test_time_to_success_configurations():
     assert time_to_success.parse_config("e4=--update_epochs 4 --lr 1e-3") == ("e4", ["--update_epochs", "4", "--lr", "1e-3"])
     assert time_to_success.parse_config("paper") == ("paper", ["--preset", "paper"])
