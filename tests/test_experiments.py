@@ -108,9 +108,11 @@ def test_aggregate_without_runs_is_a_clear_error(tmp_path):
 
 def test_navigation_grids(tmp_path):
     seeds = experiments.grid("navigate", tmp_path, timesteps=1000)
-    assert [r.config.seed for r in seeds] == [0, 1, 2]
+    assert [r.config.seed for r in seeds] == [0, 1, 2, 0, 1, 2]
     assert {(r.config.task, r.config.reward, r.config.update_epochs) for r in seeds} == {("navigate", "navigate", 4)}
+    assert [r.config.curriculum_levels for r in seeds] == [0, 0, 0, 5, 5, 5]  # without, then with the curriculum
     assert seeds[0].config.run_dir == str(tmp_path / "seeds-navigate" / "navigate-s0")
+    assert seeds[3].config.run_dir == str(tmp_path / "seeds-navigate" / "curriculum-s0")
     ablation = experiments.grid("ablation", tmp_path, timesteps=1000, task="navigate")
     assert {r.config.reward for r in ablation} == {"navigate"}
     assert ablation[1].config.run_dir == str(tmp_path / "ablation-navigate" / "no_contact-s0")
