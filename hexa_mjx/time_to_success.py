@@ -49,8 +49,12 @@ def first_success(metrics_path: Path, target: float):
     """(step, walltime_s) of the first evaluation row with success_rate >= target, or None."""
     if not metrics_path.is_file():
         return None
-    for line in metrics_path.read_text().splitlines():
-        row = json.loads(line)
+    return first_row_at([json.loads(line) for line in metrics_path.read_text().splitlines()], target)
+
+
+def first_row_at(rows: list[dict], target: float):
+    """(step, walltime_s) of the first of `rows` with success_rate >= target, or None."""
+    for row in rows:
         if row.get("success_rate", 0.0) >= target:
             return row["step"], row["walltime_s"]
     return None
@@ -104,7 +108,7 @@ def report_runs(run_dirs: list[Path], target: float) -> int:
             print(f"error: {metrics} not found: is {run_dir} a train.py run directory?", file=sys.stderr)
             return 2
         rows = [json.loads(x) for x in metrics.read_text().splitlines() if x.strip()]
-        hit = first_success(metrics, target)
+        hit = first_row_at(rows, target)
         got = f"{hit[1] / 60:.1f} min, {hit[0]:,} steps" if hit else "not reached"
         print(f"{run_dir}: success >= {target:.1%} at {got}; run {rows[-1]['step']:,} steps in "
               f"{rows[-1]['walltime_s'] / 60:.1f} min; last evaluation success {rows[-1]['success_rate']:.0%}, "

@@ -19,9 +19,9 @@ import jax.numpy as jp
 from flax import linen
 
 from hexa_mjx import distributed, faults, randomization
-from hexa_mjx.curriculum import LevelHistogram
 from hexa_mjx.checkpoints import checkpoint_dir, list_checkpoints, load_latest, remove_temporaries, save_checkpoint
 from hexa_mjx.config import TrainConfig, make_env_for, validate
+from hexa_mjx.curriculum import LevelHistogram
 from hexa_mjx.jax_setup import devices_for, prepare_jax
 from hexa_mjx.optimizer_state import AdamRecorder, adam_template, recording
 from hexa_mjx.progress import Logger, keep_rows_up_to

@@ -81,5 +81,5 @@ def wrap_for_training(env, episode_length: int = 1000, action_repeat: int = 1, r
     env = RandomizedVmap(env, randomization_fn) if randomization_fn else brax_training.VmapWrapper(env)
     env = brax_training.EpisodeWrapper(env, episode_length, action_repeat)
     env = FreshStartAutoReset(env)
-    levels = getattr(env.unwrapped, "config", None) and env.unwrapped.config.curriculum_levels
-    return LevelTap(env, levels, level_record) if levels and level_record else env
+    levels = env.unwrapped.config.curriculum_levels if level_record else 0  # brax's eval env has none
+    return LevelTap(env, levels, level_record) if levels else env
