@@ -118,7 +118,7 @@ def test_player_follows_the_mjx_rollout(env, step, state0, shipped):
         reached |= [bool(info["success"]), bool(state.info["success"])]
     assert max(gaps[:15]) < 0.002  # m, first 0.25 s
     # Both arrive. What follows an arrival is chaotic: on an AMD EPYC host the MJX rollout, stepping
-    # about near the goal, fell at about 9.8 s, so where each engine ends at 10 s is not compared.
+    # about near the goal, had fallen by 10 s, so where each engine ends at 10 s is not compared.
     assert reached.all()
 
 
