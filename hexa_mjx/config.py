@@ -36,6 +36,9 @@ class TrainConfig:
     ablate: list = dataclasses.field(default_factory=list, metadata={
         "help": "reward ablations (any of these, space-separated)", "choices": sorted(rewards.ABLATIONS),
         "nargs": "*"})
+    reward_scale: list = dataclasses.field(default_factory=list, metadata={
+        "help": "reward term weights to override, TERM=VALUE each (e.g. body_contact=-30); the terms are "
+                "hexa_mjx.rewards.TERMS", "nargs": "*"})
     ctrl_hz: float = dataclasses.field(default=60.0, metadata={"help": "control rate, Hz (240 / whole number)"})
     model: str = dataclasses.field(default="", metadata={
         "help": "MJCF robot to train (default: models/hexapod.xml); convert one with python -m hexa_mjx.convert"})
@@ -197,11 +200,27 @@ def check_ranges(cfg: TrainConfig) -> None:
         raise ConfigError(f"--hidden sizes must each be at least 1, got {cfg.hidden}")
 
 
+def reward_overrides(cfg: TrainConfig) -> dict[str, float]:
+    """--reward_scale's TERM=VALUE pairs as a dict; ConfigError on a malformed pair or an unknown term."""
+    overrides = {}
+    for pair in cfg.reward_scale:
+        term, sep, value = pair.partition("=")
+        try:
+            overrides[term] = float(value) if sep else None
+        except ValueError:
+            overrides[term] = None
+        if overrides[term] is None or not math.isfinite(overrides[term]):
+            raise ConfigError(f"--reward_scale {pair!r}: write TERM=VALUE with a finite number, e.g. body_contact=-30")
+        if term not in rewards.TERMS:
+            raise ConfigError(f"--reward_scale {pair!r}: unknown reward term {term!r}; terms are {sorted(rewards.TERMS)}")
+    return overrides
+
+
 def validate(cfg: TrainConfig, writes: bool = True) -> TrainConfig:
     """Fail fast, before any compile, on settings that cannot work; returns cfg with reward and run_dir set.
     With `writes` (process 0 of a multi-process run, or the only one) also checks the run directory."""
     cfg = dataclasses.replace(cfg, reward=cfg.reward or task_class(cfg.task).rewards[0])
-    rewards.make_scales(cfg.reward, cfg.ablate)  # unknown names raise ValueError
+    rewards.make_scales(cfg.reward, cfg.ablate, reward_overrides(cfg))  # unknown names raise ValueError
     check_ranges(cfg)
     distributed.check(cfg.coordinator, cfg.num_processes, cfg.process_id, cfg.coordinator_timeout)
     trajectories = cfg.batch_size * cfg.num_minibatches
@@ -291,7 +310,8 @@ def make_env_for(cfg: TrainConfig, task: str = "", **overrides):
         task_settings = dict(goal_min_distance=cfg.goal_min_distance, goal_max_distance=cfg.goal_max_distance)
         return make_env("", task, observe_as=cfg.task, ctrl_hz=cfg.ctrl_hz, episode_length=cfg.episode_length,
                         max_contact_points=cfg.max_contact_points, **{**task_settings, **overrides})
-    settings = dict(ablate=tuple(cfg.ablate), ctrl_hz=cfg.ctrl_hz, episode_length=cfg.episode_length,
+    settings = dict(ablate=tuple(cfg.ablate), reward_scales=reward_overrides(cfg), ctrl_hz=cfg.ctrl_hz,
+                    episode_length=cfg.episode_length,
                     start_joint_noise=cfg.start_joint_noise, start_yaw_noise=cfg.start_yaw_noise,
                     max_contact_points=cfg.max_contact_points, goal_min_distance=cfg.goal_min_distance,
                     goal_max_distance=cfg.goal_max_distance, goal_distance_cap=cfg.goal_max_distance,
