@@ -1,5 +1,6 @@
 """train.py's flags, presets, the compile cache's folder and the time-to-success study's parsing."""
 
+import dataclasses
 import json
 
 import pytest
@@ -87,3 +88,13 @@ def test_model_flag_reaches_the_environment(tmp_path):
     cfg = config.validate(config.parse_args(["--model", str(copy), "--run_dir", str(tmp_path / "run")]))
     assert config.make_env_for(cfg).config.model_path == str(copy)
     assert config.make_env_for(cfg, task="navigate").config.model_path == str(copy)
+
+
+def test_reward_scale_flag_reaches_the_environment_and_survives_the_run_config(tmp_path):
+    argv = ["--task", "navigate", "--reward_scale", "body_contact=-30", "energy=0", "--run_dir", str(tmp_path / "run")]
+    cfg = config.validate(config.parse_args(argv))
+    scales = config.make_env_for(cfg).scales
+    assert scales["body_contact"] == -30.0 and scales["energy"] == 0.0
+    assert scales["goal_reached"] == config.rewards.VARIANTS["navigate"]["goal_reached"]  # the rest untouched
+    (tmp_path / "run" / "config.json").write_text(json.dumps(dataclasses.asdict(cfg)))
+    assert config.make_env_for(config.load_config(tmp_path / "run")).scales["body_contact"] == -30.0
