@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import threading
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -66,6 +67,7 @@ class Logger:
         self.phase, self.phase_t0 = "", self.t0
         self.last_line_t, self.last_line_step = self.t0, start_step
         self.first_update_s = None
+        self.lock = threading.Lock()  # each device's tap calls progress() from its own thread
 
     def compiling(self) -> None:
         """Say that the evaluation and training programs are being compiled (or loaded from cache)."""
@@ -73,24 +75,26 @@ class Logger:
         print("compiling the environment and evaluation programs (1-3 min on a 2-core CPU the first time; "
               "seconds when the compile cache has them) ...", flush=True)
 
-    def progress(self, step: int, metrics: dict) -> None:
-        """A training-batch report from brax (every update): print a line every `interval_s`."""
-        now = time.time()
-        if self.phase == "training":
-            self.first_update_s = now - self.phase_t0
-            print(f"training compiled and its first update ran in {self.first_update_s:.0f} s "
-                  f"({now - self.t0:.0f} s since the start)", flush=True)
-            self.phase = ""
+    def progress(self, step: int, episode_return: float) -> None:
+        """A report from the training environments (`wrappers.ProgressTap`, once per rollout): the
+        run's env steps and the mean return of their latest finished episodes. Prints a line at most
+        every `interval_s`, and says when the training program has compiled and started."""
+        with self.lock:
+            now = time.time()
+            if self.phase == "training":
+                self.first_update_s = now - self.phase_t0
+                print(f"training compiled and its first rollout ran in {self.first_update_s:.0f} s "
+                      f"({now - self.t0:.0f} s since the start)", flush=True)
+                self.phase = ""
+                self.last_line_t, self.last_line_step = now, step
+                return
+            if now - self.last_line_t < self.interval_s or step <= self.last_line_step:
+                return
+            rate = (step - self.last_line_step) / (now - self.last_line_t)
+            left = max(self.cfg.num_timesteps - step, 0) / rate if rate > 0 else math.nan
+            print(f"  step {step:>9,}/{self.cfg.num_timesteps:,}  {rate:7.0f} steps/s  left {fmt_time(left)}  "
+                  f"training episodes' return {episode_return:8.1f}", flush=True)
             self.last_line_t, self.last_line_step = now, step
-            return
-        if now - self.last_line_t < self.interval_s:
-            return
-        rate = (step - self.last_line_step) / (now - self.last_line_t)
-        left = max(self.cfg.num_timesteps - step, 0) / rate if rate > 0 else math.nan
-        ret = float(metrics.get("episode/sum_reward", math.nan))
-        print(f"  step {step:>9,}/{self.cfg.num_timesteps:,}  {rate:7.0f} steps/s  left {fmt_time(left)}  "
-              f"training episodes' return {ret:8.1f}", flush=True)
-        self.last_line_t, self.last_line_step = now, step
 
     def __call__(self, step: int, metrics: dict) -> None:
         elapsed = time.time() - self.t0
@@ -105,11 +109,12 @@ class Logger:
                 self.tb.add_scalar(key.replace("eval/episode_", ""), value, step)
         self.tb.flush()
         now = time.time()
-        if self.phase == "evaluation":
-            print(f"evaluation compiled and run in {now - self.phase_t0:.0f} s; compiling the training "
-                  "programs ...", flush=True)
-            self.phase, self.phase_t0 = "training", now
-        self.last_line_t, self.last_line_step = now, step
+        with self.lock:
+            if self.phase == "evaluation":
+                print(f"evaluation compiled and run in {now - self.phase_t0:.0f} s; compiling the training "
+                      "programs ...", flush=True)
+                self.phase, self.phase_t0 = "training", now
+            self.last_line_t, self.last_line_step = now, step
         left = max(self.cfg.num_timesteps - step, 0) / rate if math.isfinite(rate) and rate > 0 else math.nan
         task_figure = (f"goals {row['goals_per_episode']:.2f}" if self.cfg.task == "navigate"
                        else f"goal bonus {row['goal_bonus']:7.1f}")

@@ -32,7 +32,7 @@ CONFIGS = {
 }
 # Random starts, as the evaluations that decide success are meant to be (eval.py's perturbed starts).
 RANDOM_STARTS = ["--start_joint_noise", "0.1", "--start_yaw_noise", "0.3"]
-FIRST_UPDATE = re.compile(r"training compiled and its first update ran in (\d+) s \((\d+) s since the start\)")
+FIRST_UPDATE = re.compile(r"training compiled and its first (?:update|rollout) ran in (\d+) s \((\d+) s since the start\)")
 
 
 def parse_config(text: str) -> tuple[str, list[str]]:

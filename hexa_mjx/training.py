@@ -85,14 +85,23 @@ def evals_for(cfg: TrainConfig, remaining: int) -> int:
     return 1 + max(1, math.ceil((cfg.num_evals - 1) * remaining / cfg.num_timesteps))
 
 
-def wrap_env_fn(env, randomized: bool = False, level_record=None):
+def wrap_env_fn(env, randomized: bool = False, level_record=None, progress_record=None, progress_every: int = 64):
     """brax's training wrappers, or ours that redraw the start state (and first goal) every episode,
-    give each environment its own randomized model, and report curriculum levels to `level_record`."""
+    give each environment its own randomized model, report curriculum levels to `level_record`,
+    and report the training environments' progress to `progress_record`."""
     from hexa_mjx import wrappers
 
-    if level_record is not None:
-        return functools.partial(wrappers.wrap_for_training, level_record=level_record)
-    return wrappers.wrap_for_training if env.fresh_starts or randomized else None
+    fresh_starts = env.fresh_starts or randomized
+    if level_record is None and progress_record is None:
+        return wrappers.wrap_for_training if fresh_starts else None
+    # brax wraps the training environments first, then the evaluation ones: only the first are watched.
+    progress = [progress_record]
+
+    def wrap(env, **kwargs):
+        return wrappers.wrap_for_training(env, level_record=level_record, progress_record=progress.pop() if progress
+                                          else None, progress_every=progress_every, fresh_starts=fresh_starts,
+                                          **kwargs)
+    return wrap
 
 
 def resume_point(cfg: TrainConfig, run_dir: Path, template, optimizer_template) -> tuple[int, object, object]:
@@ -156,11 +165,13 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
 
     pending = {}  # the checkpoint brax handed over, saved once its evaluation row is written
 
+    def on_tap(clock, return_sum, episodes):  # hexa_mjx.wrappers.ProgressTap, from each device
+        if logger is not None:
+            logger.progress(start_step + int(clock) * cfg.num_envs,
+                            float(return_sum) / int(episodes) if episodes else math.nan)
+
     def on_progress(step, metrics):
         if logger is None:  # brax reports on process 0 only; kept safe for other callers
-            return
-        if "eval/episode_reward" not in metrics:  # a training batch (brax's log_training_metrics)
-            logger.progress(start_step + step, metrics)
             return
         fresh_row = step > 0 or start_step not in logged  # brax evaluates restored params at its step 0
         if fresh_row:
@@ -191,11 +202,11 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
     with recording(recorder):
         ppo.train(environment=env, eval_env=eval_env, num_timesteps=remaining, **ppo_settings(cfg),
                   seed=cfg.seed + start_step, max_devices_per_host=devices,
-                  wrap_env_fn=wrap_env_fn(env, cfg.randomize, levels),
+                  wrap_env_fn=wrap_env_fn(env, cfg.randomize, levels, on_tap if cfg.progress else None,
+                                          progress_every=cfg.steps_per_update // cfg.num_envs),
                   randomization_fn=randomization_fn,
                   num_evals=evals_for(cfg, remaining), num_eval_envs=cfg.num_eval_envs, deterministic_eval=True,
-                  progress_fn=on_progress, policy_params_fn=on_params, restore_params=restore,
-                  log_training_metrics=cfg.progress, training_metrics_steps=cfg.steps_per_update)
+                  progress_fn=on_progress, policy_params_fn=on_params, restore_params=restore)
     total = time.time() - t0
     if logger is None:
         print(f"process {jax.process_index()} done: {remaining:,} steps in {total / 60:.1f} min")

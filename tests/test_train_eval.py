@@ -30,7 +30,7 @@ def test_train_writes_run_directory(trained):
     assert "success" in proc.stdout and "steps/s" in proc.stdout and "done:" in proc.stdout
     # Compiling is announced, and its end (the first training update) reported.
     assert "compiling the environment and evaluation programs" in proc.stdout
-    assert re.search(r"training compiled and its first update ran in \d+ s", proc.stdout)
+    assert re.search(r"training compiled and its first rollout ran in \d+ s", proc.stdout)
     # One CPU device per core, as many as divide the 8 envs and the batch of 8.
     devices = max(d for d in range(1, len(os.sched_getaffinity(0)) + 1) if 8 % d == 0)
     assert f"on 8 envs ({devices} cpu device" in proc.stdout

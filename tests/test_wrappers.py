@@ -1,4 +1,5 @@
-"""FreshStartAutoReset on a toy environment: a new start state is drawn at every episode boundary."""
+"""The training wrappers on a toy environment: FreshStartAutoReset draws a new start state at every
+episode boundary; ProgressTap reports the latest finished episodes' returns."""
 
 import jax
 import jax.numpy as jp
@@ -23,7 +24,8 @@ class Toy(Env):
 
     def step(self, state, action):
         data = {"x": state.pipeline_state["x"] + action, "t": state.pipeline_state["t"] + 1}
-        return state.replace(pipeline_state=data, obs=self.observe(data), done=(data["x"][0] > 10).astype(float))
+        return state.replace(pipeline_state=data, obs=self.observe(data), reward=action[0],
+                             done=(data["x"][0] > 10).astype(float))
 
     @property
     def observation_size(self):
@@ -64,3 +66,30 @@ def test_zero_noise_uses_brax_wrappers():
     assert training.wrap_env_fn(hexa_mjx.make_env()) is None  # the report's fixed start
     assert training.wrap_env_fn(hexa_mjx.make_env(start_yaw_noise=0.1)) is wrappers.wrap_for_training
     assert training.wrap_env_fn(hexa_mjx.make_env(task="navigate")) is wrappers.wrap_for_training  # random headings
+
+
+def test_progress_tap_reports_steps_and_finished_episodes_returns():
+    reports = []
+    env = wrappers.wrap_for_training(Toy(), episode_length=3, progress_every=2,
+                                     progress_record=lambda *r: reports.append([float(x) for x in r]))
+    state = jax.jit(env.reset)(jax.random.split(jax.random.PRNGKey(0), 2))
+    step = jax.jit(env.step)
+    # env 0 ends every step with return 20; env 1 earns 1 per step and ends at its 3-step limit.
+    for _ in range(4):
+        state = step(state, jp.array([[20.0], [1.0]]))
+        jax.effects_barrier()
+        if len(reports) == 1:
+            assert reports == [[2, 20, 1]]  # after 2 steps only env 0 has finished an episode
+    assert reports == [[2, 20, 1], [4, 23, 2]]  # env 1's first episode returned 3
+
+
+def test_only_the_training_environments_are_tapped():
+    import hexa_mjx
+    from brax.envs.wrappers import training as brax_training
+
+    from hexa_mjx import training
+
+    wrap = training.wrap_env_fn(hexa_mjx.make_env(), progress_record=print)  # fixed start: brax's auto-reset
+    first, second = wrap(hexa_mjx.make_env(), episode_length=10), wrap(hexa_mjx.make_env(), episode_length=10)
+    assert isinstance(first, wrappers.ProgressTap) and isinstance(first.env, brax_training.AutoResetWrapper)
+    assert isinstance(second, brax_training.AutoResetWrapper)  # brax's evaluation environments
