@@ -86,7 +86,7 @@ class ProgressTap(Wrapper):
     def reset(self, rng: jax.Array) -> State:
         state = self.env.reset(rng)
         state.info["progress_clock"] = jp.zeros(rng.shape[:-1], jp.int32)
-        state.info["last_return"] = jp.full(rng.shape[:-1], jp.nan)
+        state.info["last_return"] = jp.full(rng.shape[:-1], jp.nan, jp.float32)  # not weak-typed: one compile
         return state
 
     def step(self, state: State, action: jax.Array) -> State:

@@ -74,6 +74,9 @@ def test_progress_tap_reports_steps_and_finished_episodes_returns():
                                      progress_record=lambda *r: reports.append([float(x) for x in r]))
     state = jax.jit(env.reset)(jax.random.split(jax.random.PRNGKey(0), 2))
     step = jax.jit(env.step)
+    # A stepped state has the reset state's types, weak types included: brax's epoch compiles once.
+    typeof = lambda s: [(x.shape, x.dtype, x.weak_type) for x in jax.tree.leaves(jax.tree.map(jax.typeof, s))]  # noqa: E731
+    assert typeof(jax.eval_shape(env.step, state, jp.zeros((2, 1)))) == typeof(state)
     # env 0 ends every step with return 20; env 1 earns 1 per step and ends at its 3-step limit.
     for _ in range(4):
         state = step(state, jp.array([[20.0], [1.0]]))
