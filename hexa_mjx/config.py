@@ -107,9 +107,9 @@ class TrainConfig:
         "help": "episodes per evaluation (deterministic policy)"})
     compile_cache: bool = dataclasses.field(default=True, metadata={
         "help": "keep compiled programs in a per-user cache folder (--no_compile_cache: off)"})
-    progress: bool = dataclasses.field(default=False, metadata={
-        "help": "a console line every 15 s between evaluations (costs about 20%% of training speed; "
-                "docs/RESULTS.md)"})
+    progress: bool = dataclasses.field(default=True, metadata={
+        "help": "a console line every 15 s between evaluations and one when training has compiled "
+                "(--no_progress: off; it costs about 1%% of training speed, docs/RESULTS.md)"})
     cpu_devices: int = dataclasses.field(default=0, metadata={
         "help": "on the CPU: XLA host devices that split environments and minibatches, one core each "
                 "(0: one per core, as many as divide num_envs and batch_size; 1: a single device)"})

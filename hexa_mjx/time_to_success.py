@@ -8,7 +8,7 @@ A run stops (SIGTERM, which train.py treats as Ctrl-C) at its first evaluation w
 `--target`, unless `--full` lets it finish its budget. It prints, per configuration and seed:
 wall time and env steps to that evaluation, the time to the first training update (compile),
 and a median-and-range summary. The time to the first update is read from train.py's
-"training compiled" line, which `--progress` turns on (add it to --extra). Everything is also written to `<out>/time_to_success.json`.
+"training compiled" line (absent with --no_progress). Everything is also written to `<out>/time_to_success.json`.
 """
 
 from __future__ import annotations

@@ -54,7 +54,7 @@ TINY = ["--num_envs", "8", "--batch_size", "8", "--num_minibatches", "2", "--unr
         "--num_evals", "2", "--num_eval_envs", "2", "--episode_length", "20"]
 # The trained fixture draws start noise per episode (hexa_mjx.wrappers instead of brax's auto-reset),
 # and trains on randomized physics with pushes: the whole path of those through brax's PPO.
-NOISE = ["--start_joint_noise", "0.05", "--start_yaw_noise", "0.1", "--progress", "--randomize",
+NOISE = ["--start_joint_noise", "0.05", "--start_yaw_noise", "0.1", "--randomize",
          "--push_speed", "0.3", "--push_interval", "0.1"]
 
 

@@ -9,11 +9,11 @@ from hexa_mjx import config, jax_setup, time_to_success
 
 
 def test_flags_and_their_negations():
-    cfg = config.parse_args(["--task", "navigate", "--no_compile_cache", "--progress", "--resume"])
+    cfg = config.parse_args(["--task", "navigate", "--no_compile_cache", "--no_progress", "--resume"])
     assert cfg.task == "navigate" and cfg.reward == "navigate"  # the task's own reward by default
-    assert not cfg.compile_cache and cfg.progress and cfg.resume
+    assert not cfg.compile_cache and not cfg.progress and cfg.resume
     default = config.parse_args([])
-    assert default.compile_cache and not default.progress and default.reward == "goal_directed"
+    assert default.compile_cache and default.progress and default.reward == "goal_directed"
 
 
 def test_preset_fills_only_what_the_command_line_leaves():
