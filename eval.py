@@ -57,6 +57,11 @@ def main(argv=None) -> int:
     parser.add_argument("--push_interval", type=float, default=None, help="s between kicks (default: the run's)")
     parser.add_argument("--action_latency", type=float, default=None, help="control steps of command delay, 0-1")
     parser.add_argument("--obs_noise", type=float, default=None, help="observation noise level (1: Playground's)")
+    parser.add_argument("--terrain", default=None, choices=["flat", "bumps", "slopes", "steps", "mixed"],
+                        help="ground to evaluate on (default: the run's; hexa_mjx.terrain)")
+    parser.add_argument("--terrain_seed", type=int, default=None, help="seed of the generated terrain (default: 0)")
+    parser.add_argument("--terrain_difficulty", type=float, default=None,
+                        help="terrain sizes as a fraction of the full ones, 0 to 1 (default: the run's)")
     parser.add_argument("--shadows", action="store_true",
                         help="render shadows and the skybox (5x slower without a GPU)")
     parser.add_argument("--no_compile_cache", dest="compile_cache", action="store_false",
@@ -79,7 +84,9 @@ def main(argv=None) -> int:
                                      disabled_legs=disabled, failure_mode=args.failure_mode,
                                      leg_failure="none" if disabled else args.leg_failure,
                                      push_speed=args.push_speed, push_interval=args.push_interval,
-                                     action_latency=args.action_latency, obs_noise=args.obs_noise)
+                                     action_latency=args.action_latency, obs_noise=args.obs_noise,
+                                     terrain=args.terrain, terrain_seed=args.terrain_seed,
+                                     terrain_difficulty=args.terrain_difficulty)
     except (FileNotFoundError, RuntimeError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

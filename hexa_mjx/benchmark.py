@@ -284,6 +284,9 @@ def main(argv=None) -> None:
                         help="contact points MJX keeps per step, for every measurement (0: all the model's slots)")
     parser.add_argument("--compare_contacts", type=int, nargs="+", metavar="N",
                         help="also time these max_contact_points at the largest batch, in turns with the setting above")
+    parser.add_argument("--compare_terrain", nargs="+", metavar="KIND",
+                        choices=["bumps", "slopes", "steps", "mixed"],
+                        help="also time these terrains at the largest batch, in turns with the flat floor")
     args = parser.parse_args(argv)
 
     jax_setup.prepare_jax()  # as train.py does; single-device timings use one of the CPU devices
@@ -315,6 +318,15 @@ def main(argv=None) -> None:
         print(f"contact points kept, env steps/s at {args.batches[-1]} envs (timed in turns, median of {args.repeats}):")
         for n, (_, rate) in rates.items():
             print(f"  max_contact_points={n:<3} ({envs[n].contact_slots} slots) {rate:8.0f}  {rate / base:5.2f}x")
+    if args.compare_terrain:
+        envs = {kind: hexa_mjx.make_env(ctrl_hz=args.ctrl_hz, terrain=kind, **cap)
+                for kind in ["flat", *args.compare_terrain]}
+        rates = compare_speed(envs, args.batches[-1], args.steps, args.repeats)
+        base = rates["flat"][1]
+        print(f"terrain, env steps/s at {args.batches[-1]} envs (timed in turns, median of {args.repeats}):")
+        for kind, (compile_s, rate) in rates.items():
+            print(f"  {kind:<7} ({envs[kind].contact_slots} contact slots) {rate:8.0f}  {rate / base:5.2f}x  "
+                  f"compile {compile_s:.0f} s")
     if args.profile:
         p = training_profile(args.batches[-1], args.repeats, **cap)
         parts = {"physics without contacts": p["env_without_contacts"], "contacts": p["env"] - p["env_without_contacts"],

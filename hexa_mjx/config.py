@@ -101,6 +101,11 @@ class TrainConfig:
         "help": "control steps (0 to 1): each episode's commands arrive up to this late"})
     obs_noise: float = dataclasses.field(default=0.0, metadata={
         "help": "observation noise, a multiple of hexa_mjx.observations.NOISE_SCALES (1: Playground's levels)"})
+    terrain: str = dataclasses.field(default="flat", metadata={
+        "help": "ground to train on: the flat floor, or a heightfield (hexa_mjx.terrain: 4 cm bumps, 10-degree "
+                "slopes, 3 cm steps, or patches of each)", "choices": ["flat", "bumps", "slopes", "steps", "mixed"]})
+    terrain_difficulty: float = dataclasses.field(default=1.0, metadata={
+        "help": "the terrain's heights and slopes as a fraction of the full sizes (0 to 1)"})
     max_contact_points: int = dataclasses.field(default=0, metadata={
         "help": "MJX keeps only this many deepest robot-floor contacts per step (0: all 40 slots)"})
     num_eval_envs: int = dataclasses.field(default=32, metadata={
@@ -317,5 +322,6 @@ def make_env_for(cfg: TrainConfig, task: str = "", **overrides):
                     goal_max_distance=cfg.goal_max_distance, goal_distance_cap=cfg.goal_max_distance,
                     leg_failure=cfg.leg_failure, leg_failure_rate=cfg.leg_failure_rate, failure_mode=cfg.failure_mode,
                     push_speed=cfg.push_speed, push_interval=cfg.push_interval,
-                    action_latency=cfg.action_latency, obs_noise=cfg.obs_noise)
+                    action_latency=cfg.action_latency, obs_noise=cfg.obs_noise, terrain=cfg.terrain,
+                    terrain_difficulty=cfg.terrain_difficulty)
     return make_env(cfg.reward, cfg.task, **{**settings, **overrides})

@@ -264,7 +264,7 @@ class HexapodEnv(Env):
     def contact_counts(self, data: mjx.Data):
         """Floor contacts of a physics state: (leg contacts while that leg's foot is lifted
         more than `lift_clearance`, contacts of any non-foot geom), from MJX's contact arrays."""
-        return self.robot.contact_counts(*floor_contacts(data), data.geom_xpos[self.feet, 2],
+        return self.robot.contact_counts(*floor_contacts(data), data.geom_xpos[self.feet],
                                          self.config.lift_clearance)
 
     def reward_terms(self, prev: mjx.Data, data: mjx.Data, done, completed) -> dict:
@@ -272,7 +272,7 @@ class HexapodEnv(Env):
         bad, non_foot = self.contact_counts(data)
         power = servo_power(data.actuator_force, data.qvel, self.robot.actuator_dof)
         return rewards.terms(self._active_terms(), self.config, prev.qpos, data.qpos, data.qvel, self.goal(data),
-                             bad, non_foot, done, completed, power)
+                             bad, non_foot, done, completed, power, ground=self.robot.ground(data.qpos[:2]))
 
     # -- what a task defines ----------------------------------------------------
 

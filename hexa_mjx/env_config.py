@@ -9,6 +9,7 @@ import dataclasses
 import math
 
 from hexa_mjx import robot
+from hexa_mjx.terrain import KINDS as TERRAINS
 
 
 @dataclasses.dataclass(frozen=True)
@@ -72,6 +73,11 @@ class EnvConfig:
     # Observation noise: uniform in +-obs_noise x hexa_mjx.observations.NOISE_SCALES on joint angles and
     # velocities and the torso's velocities (0: none; 1: Playground's locomotion levels).
     obs_noise: float = 0.0
+    # Rough terrain (hexa_mjx.terrain): "flat" (the floor plane), "bumps", "slopes", "steps" or
+    # "mixed", generated at `terrain_seed`, its sizes scaled by `terrain_difficulty` (0 to 1).
+    terrain: str = "flat"
+    terrain_seed: int = 0
+    terrain_difficulty: float = 1.0
 
 
 def make_config(task: str = "goal", reward: str = "", **overrides) -> EnvConfig:
@@ -123,6 +129,10 @@ def check_config(config: EnvConfig) -> None:
         raise ValueError(f"push_interval must be a time above 0 s, got {config.push_interval}")
     if not (math.isfinite(config.action_latency) and 0 <= config.action_latency <= 1):
         raise ValueError(f"action_latency is in control steps from 0 to 1, got {config.action_latency}")
+    if config.terrain not in TERRAINS:
+        raise ValueError(f"unknown terrain {config.terrain!r}; choose one of {list(TERRAINS)}")
+    if not (math.isfinite(config.terrain_difficulty) and 0 <= config.terrain_difficulty <= 1):
+        raise ValueError(f"terrain_difficulty is a fraction from 0 to 1, got {config.terrain_difficulty}")
     if not (math.isfinite(config.obs_noise) and 0 <= config.obs_noise <= 10):
         raise ValueError(f"obs_noise is a multiple of the noise scales from 0 to 10, got {config.obs_noise}")
     if config.leg_failure not in ("none", "random"):

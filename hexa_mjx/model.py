@@ -12,13 +12,14 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from hexa_mjx import robot
+from hexa_mjx import robot, terrain as terrains
 from hexa_mjx.env_config import EnvConfig
 from hexa_mjx.kinematics import namespace
 
 
-def load_model(path: Path, max_contact_points: int = 0) -> mujoco.MjModel:
-    """The MJCF at `path` with MJX's contact cap set (0: none, whatever the file says)."""
+def load_model(path: Path, max_contact_points: int = 0, terrain: terrains.Terrain | None = None) -> mujoco.MjModel:
+    """The MJCF at `path` with MJX's contact cap set (0: none, whatever the file says) and its
+    floor made a heightfield of `terrain` (None: as the file has it)."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"model {path} not found; run `python -m hexa_mjx.convert URDF -o {path}`")
@@ -28,6 +29,9 @@ def load_model(path: Path, max_contact_points: int = 0) -> mujoco.MjModel:
             spec.delete(numeric)
     if max_contact_points:
         spec.add_numeric(name="max_contact_points", data=[max_contact_points])
+    if terrain is None:
+        return spec.compile()
+    terrains.add_to_spec(spec, terrain, robot.FLOOR_GEOM)
     return spec.compile()
 
 
@@ -42,7 +46,9 @@ class RobotModel:
     """The compiled model of an `EnvConfig`, the geoms the rewards read, and the settled start."""
 
     def __init__(self, config: EnvConfig):
-        model = load_model(Path(config.model_path), config.max_contact_points)
+        self.terrain = (terrains.generate(config.terrain, config.terrain_seed, config.terrain_difficulty)
+                        if config.terrain != "flat" else None)
+        model = load_model(Path(config.model_path), config.max_contact_points, self.terrain)
         if config.solver_iterations is not None:
             model.opt.iterations = config.solver_iterations
         if config.ls_iterations is not None:
@@ -101,14 +107,20 @@ class RobotModel:
         self.start_xy = self.qpos0[:2].copy()
         self.hold_ctrl = self.qpos0[self.actuator_qpos].astype(np.float32)  # a locked leg's targets, rad
 
-    def contact_counts(self, geom1, geom2, dist, foot_z, lift_clearance: float):
-        """(leg contacts while that leg's foot is lifted more than `lift_clearance` m, contacts of
-        any non-foot geom) among contacts with the floor, from contact arrays of either engine."""
+    def ground(self, xy):
+        """Ground height (m) under the points `xy` (..., 2): 0 on the flat floor."""
+        return terrains.ground_height(self.terrain, xy)
+
+    def contact_counts(self, geom1, geom2, dist, foot_pos, lift_clearance: float):
+        """(leg contacts while that leg's foot is lifted more than `lift_clearance` m above the
+        ground under it, contacts of any non-foot geom) among contacts with the floor, from contact
+        arrays of either engine; `foot_pos` (feet, 3) are the foot spheres' centres."""
         xp = namespace(dist)
         on_floor = (dist < 0) & ((geom1 == self.floor) | (geom2 == self.floor))
         other = xp.where(geom1 == self.floor, geom2, geom1)
         leg = xp.asarray(self.geom_leg)[other]
-        lifted = (foot_z - xp.asarray(self.foot_radius))[xp.maximum(leg, 0)] > lift_clearance
+        clearance = foot_pos[:, 2] - xp.asarray(self.foot_radius) - self.ground(foot_pos[:, :2])
+        lifted = clearance[xp.maximum(leg, 0)] > lift_clearance
         bad = on_floor & (leg >= 0) & lifted
         return bad.sum(), (on_floor & ~xp.asarray(self.geom_is_foot)[other]).sum()
 

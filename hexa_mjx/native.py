@@ -157,7 +157,7 @@ class NativeEnv:
         bad, non_foot = self.contact_counts()
         power = servo_power(data.actuator_force, data.qvel, self.robot.actuator_dof)
         terms = rewards.terms(self.active, self.config, prev_qpos, data.qpos, data.qvel, goal, bad, non_foot,
-                              np.bool_(done), np.bool_(completed), power)
+                              np.bool_(done), np.bool_(completed), power, ground=self.robot.ground(data.qpos[:2]))
         reward = float(sum(self.scales[name] * value for name, value in terms.items()))
         self.t += 1
         if completed:
@@ -177,7 +177,7 @@ class NativeEnv:
     def contact_counts(self) -> tuple[int, int]:
         """(leg contacts while that foot is lifted, non-foot contacts) with the floor, now."""
         c, feet = self.data.contact, self.robot.feet
-        return self.robot.contact_counts(c.geom1, c.geom2, c.dist, self.data.geom_xpos[feet, 2],
+        return self.robot.contact_counts(c.geom1, c.geom2, c.dist, self.data.geom_xpos[feet],
                                          self.config.lift_clearance)
 
     def _draw_failure(self) -> np.ndarray:

@@ -84,9 +84,10 @@ TERMS = {
 }
 
 def terms(names, config, prev_qpos, qpos, qvel, goal_xy, bad_contacts, non_foot_contacts, done, completed,
-          power) -> dict:
+          power, ground=0.0) -> dict:
     """Unscaled values of the terms `names` for the transition prev_qpos -> (qpos, qvel), with
-    `goal_xy` the step's goal, contact counts and servo power (W) of the new state, and `config` an EnvConfig.
+    `goal_xy` the step's goal, contact counts and servo power (W) of the new state, `ground` the
+    terrain's height (m) under the torso, and `config` an EnvConfig.
     Either engine's arrays; under jit, XLA drops the inputs no named term uses."""
     xp = namespace(qpos)
     xy, prev_xy, vel_xy = qpos[:2], prev_qpos[:2], qvel[:2]
@@ -101,7 +102,7 @@ def terms(names, config, prev_qpos, qpos, qvel, goal_xy, bad_contacts, non_foot_
         "velocity_alignment": (vel_xy, goal_dir),
         "goal_bonus": (dist, config.success_radius, non_foot_contacts if config.bonus_on_feet_only else 0),
         "stability": (roll, pitch),
-        "height": (qpos[2], config.target_height),
+        "height": (qpos[2] - ground, config.target_height),
         "energy": (qvel[6:],),
         "mechanical_power": (power,),
         "contact_quality": (bad_contacts,),
