@@ -38,7 +38,7 @@ def stability(roll, pitch):
 
 
 def height(z, target):
-    """|z - target| of the torso origin, m."""
+    """|z - target| of the torso origin above the ground under it, m."""
     return abs(z - target)
 
 

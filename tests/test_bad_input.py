@@ -73,6 +73,8 @@ TRAIN_CASES = [
     (["--num_processes", "2", "--process_id", "5", "--coordinator", "localhost:1"], "--process_id must be in 0..1"),
     (["--num_processes", "2"], "needs --coordinator HOST:PORT"),
     (["--policy_dist", "beta"], "invalid choice: 'beta'"),
+    (["--terrain", "lava"], "invalid choice: 'lava'"),
+    (["--terrain", "bumps", "--terrain_difficulty", "2"], "terrain_difficulty is a fraction from 0 to 1"),
 ]
 
 EVAL_CASES = [
@@ -92,6 +94,8 @@ EVAL_CASES = [
     (["--ckpt", POLICY, "--action_latency", "2"], "action_latency is in control steps from 0 to 1"),
     (["--ckpt", POLICY, "--out", "/proc/hexa_mjx_eval"], "cannot write to --out"),
     (["--ckpt", POLICY, "--max_contact_points", "999"], "above the model's 40 robot-floor contact slots"),
+    (["--ckpt", POLICY, "--terrain", "lava"], "invalid choice: 'lava'"),
+    (["--ckpt", POLICY, "--terrain", "steps", "--terrain_difficulty", "-1"], "terrain_difficulty is a fraction"),
 ]
 
 CONVERT_CASES = [
@@ -110,6 +114,7 @@ MAKE_ENV_CASES = [
     (dict(disabled_legs=(1, 2, 3, 4, 5, 6)), "all"),
     (dict(disabled_legs=(9,)), "leg"),
     (dict(wings=2), "unknown environment setting"),
+    (dict(terrain="lava"), "unknown terrain 'lava'"),
 ]
 
 

@@ -1,0 +1,94 @@
+"""Rough terrain: generated heightfields, the ground height the contact and height terms read,
+and the terrain in both engines. MuJoCo's own ray casts are the reference for the ground height."""
+
+import mujoco
+import numpy as np
+import pytest
+
+from hexa_mjx import terrain
+from hexa_mjx.env_config import make_config
+from hexa_mjx.model import RobotModel
+
+
+@pytest.fixture(scope="module", params=["bumps", "slopes", "steps", "mixed"])
+def robot_on(request):
+    return RobotModel(make_config(terrain=request.param, terrain_seed=3))
+
+
+def ray_height(model, data, xy):
+    """Height of the first surface below (x, y, 1 m), by MuJoCo's ray cast (robot geoms excluded)."""
+    hit = np.zeros(1, np.int32)
+    dist = mujoco.mj_ray(model, data, np.array([xy[0], xy[1], 1.0]), np.array([0.0, 0.0, -1.0]), None, 1, -1, hit)
+    assert hit[0] == model.geom("floor").id
+    return 1.0 - dist
+
+
+def test_ground_height_matches_mujocos_heightfield(robot_on):
+    model = robot_on.mj_model
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    points = np.random.default_rng(1).uniform(-9, 9, size=(200, 2))
+    points = points[np.hypot(*points.T) > 1.0]  # away from the robot standing at the origin
+    ours = terrain.ground_height(robot_on.terrain, points)
+    theirs = np.array([ray_height(model, data, p) for p in points])
+    # MuJoCo triangulates each 0.1 m cell where we interpolate bilinearly: they differ only where a
+    # cell is curved or holds a step's edge, by at most a quarter of the cell's twist
+    # |h00 + h11 - h01 - h10| (at its centre), so by half the largest jump between neighbours.
+    h = robot_on.terrain.heights
+    jump = max(np.abs(np.diff(h, axis=0)).max(), np.abs(np.diff(h, axis=1)).max())
+    assert np.median(np.abs(ours - theirs)) < 1e-3 and np.abs(ours - theirs).max() <= jump / 2 + 1e-4
+    assert ours.max() > 0.02  # the terrain is not flat
+
+
+def test_terrain_sizes_follow_the_kind_and_difficulty():
+    x, y = np.meshgrid(*(np.linspace(-9, 9, 91),) * 2)
+    bumps = terrain.generate("bumps", seed=0)
+    assert bumps.max_height == pytest.approx(terrain.BUMP_HEIGHT, rel=1e-5)
+    assert terrain.generate("bumps", seed=0, difficulty=0.5).max_height == pytest.approx(terrain.BUMP_HEIGHT / 2, rel=1e-5)
+    slopes = terrain.generate("slopes")
+    gy, gx = np.gradient(slopes.heights, terrain.CELL)
+    # Off the ridges, valleys and the flat spawn disc, the slope is SLOPE_DEG.
+    angle = np.degrees(np.arctan(np.hypot(gx, gy)))
+    assert np.median(angle[angle > 1]) == pytest.approx(terrain.SLOPE_DEG, abs=0.2)
+    steps = terrain.generate("steps", seed=2).heights
+    assert set(np.round(np.unique(steps) / terrain.STEP_HEIGHT, 6)) == {0.0, 1.0, 2.0}
+    assert not np.array_equal(terrain.generate("bumps", seed=1).heights, bumps.heights)  # the seed matters
+    for kind in terrain.KINDS:  # the start stays flat, so the settled pose is the same everywhere
+        t = terrain.generate(kind, seed=5)
+        assert terrain.ground_height(t, np.array([[0.0, 0.0], [0.3, -0.3]])) == pytest.approx(0.0)
+    with pytest.raises(ValueError, match="unknown terrain 'lava'"):
+        terrain.generate("lava")
+
+
+def test_settled_start_is_the_flat_floors(robot_on):
+    """The spawn disc is flat; the heightfield's contacts settle the pose within 1 mm and 0.005 rad
+    of the plane's (its collision routine is not the plane's, so not to the last digit)."""
+    flat = RobotModel(make_config())
+    np.testing.assert_allclose(robot_on.qpos0[:3], flat.qpos0[:3], atol=1e-3)
+    np.testing.assert_allclose(robot_on.qpos0[7:], flat.qpos0[7:], atol=5e-3)
+
+
+def test_lifted_foot_is_measured_from_the_ground_under_it(robot_on):
+    """A leg contact counts as dragging only when its foot is more than 2 cm above the ground under
+    it: on a bump, a foot 3 cm above z = 0 can be on the ground."""
+    r = robot_on
+    geom_leg1_shin = next(g for g in range(r.mj_model.ngeom) if r.geom_leg[g] == 0 and g not in r.feet)
+    feet = np.zeros((len(r.feet), 3))
+    feet[:, :2] = np.random.default_rng(0).uniform(-8, 8, size=(len(r.feet), 2))
+    ground = terrain.ground_height(r.terrain, feet[:, :2])
+    geom1, geom2, dist = np.array([r.floor]), np.array([geom_leg1_shin]), np.array([-0.001])
+    feet[:, 2] = ground + r.foot_radius + 0.01  # 1 cm above the ground under each foot
+    assert r.contact_counts(geom1, geom2, dist, feet, 0.02)[0] == 0
+    feet[:, 2] = ground + r.foot_radius + 0.03
+    assert r.contact_counts(geom1, geom2, dist, feet, 0.02)[0] == 1
+
+
+def test_height_term_reads_the_ground_under_the_torso():
+    from hexa_mjx import rewards
+
+    config = make_config(terrain="slopes")
+    qpos = np.zeros(25)
+    qpos[2], qpos[3] = config.target_height + 0.1, 1.0  # 10 cm above z = 0, upright
+    args = (config, qpos, qpos, np.zeros(24), np.zeros(2), 0, 0, False, False, 0.0)
+    assert rewards.terms(["height"], *args, ground=0.1)["height"] == pytest.approx(0.0)
+    assert rewards.terms(["height"], *args)["height"] > 0  # on the flat floor the torso is 10 cm too high
