@@ -57,6 +57,8 @@ def main(argv=None) -> int:
     parser.add_argument("--push_interval", type=float, default=None, help="s between kicks (default: the run's)")
     parser.add_argument("--action_latency", type=float, default=None, help="control steps of command delay, 0-1")
     parser.add_argument("--obs_noise", type=float, default=None, help="observation noise level (1: Playground's)")
+    parser.add_argument("--randomize", action="store_true",
+                        help="each episode on its own randomized physics (train.py --randomize's ranges)")
     parser.add_argument("--terrain", default=None, choices=["flat", "bumps", "slopes", "steps", "mixed"],
                         help="ground to evaluate on (default: the run's; hexa_mjx.terrain)")
     parser.add_argument("--terrain_seed", type=int, default=None, help="seed of the generated terrain (default: 0)")
@@ -77,6 +79,7 @@ def main(argv=None) -> int:
         disabled = parse_legs(args.disabled_legs) if args.disabled_legs is not None else None
         result = evaluation.evaluate(args.ckpt, episodes=args.episodes, videos=args.videos, out=args.out,
                                      seed=args.seed, video=args.video, task=args.task, shadows=args.shadows,
+                                     randomize=args.randomize,
                                      start_joint_noise=args.start_joint_noise, start_yaw_noise=args.start_yaw_noise,
                                      max_contact_points=args.max_contact_points, waypoints=waypoints,
                                      goal_min_distance=args.goal_min_distance,

@@ -12,7 +12,9 @@ import jax
 import jax.numpy as jp
 import numpy as np
 
-from hexa_mjx import checkpoints, config, gait, nav_metrics, plots, robot, training
+from brax.envs.wrappers import training as brax_training
+
+from hexa_mjx import checkpoints, config, gait, nav_metrics, plots, randomization, robot, training, wrappers
 from hexa_mjx.model import servo_power
 from hexa_mjx.video import render_video
 
@@ -43,11 +45,12 @@ def foot_stance(env, data) -> jax.Array:
     return (on_floor[None] & (geom[None] == jp.asarray(env.feet)[:, None])).any(1)
 
 
-def rollout(env, policy, num_episodes: int, seed: int = 0):
+def rollout(env, policy, num_episodes: int, seed: int = 0, ranges=None):
     """Run `num_episodes` episodes in parallel to their end; returns per-step arrays (time first)
     of qpos, the goal each step is scored against, reward, done, distance, floor contacts per
     CONTACT_GROUPS entry, foot stance, actuator power and the env's metrics, with `alive` marking
-    steps in an episode.
+    steps in an episode. With `ranges` (a `randomization.Ranges`) each episode runs on its own
+    randomized physics model, drawn from `seed`.
 
     The episodes are split over as many of JAX's devices as divide them (one per core on the CPU
     after `prepare_jax`), in order, so episode i is the same whatever the split.
@@ -58,13 +61,20 @@ def rollout(env, policy, num_episodes: int, seed: int = 0):
     keys = jax.random.split(jax.random.PRNGKey(seed), num_episodes)
     step_keys = jax.random.split(keys[0], steps)  # the deterministic policy ignores them
 
-    def run(keys):
-        state = jax.vmap(env.reset)(keys)
+    models, model_axes = None, None
+    if ranges is not None:
+        model_keys = jax.random.split(jax.random.fold_in(jax.random.PRNGKey(seed), 11), num_episodes)
+        models, model_axes = randomization.randomization_fn(env, ranges)(env.mjx_model, model_keys)
+
+    def run(keys, models=None):
+        batched = (wrappers.RandomizedVmap(env, lambda _: (models, model_axes)) if models is not None
+                   else brax_training.VmapWrapper(env))
+        state = batched.reset(keys)
 
         def body(carry, key):
             state, alive = carry
             action = policy(state.obs, key)
-            nxt = jax.vmap(env.step)(state, action)
+            nxt = batched.step(state, action)
             out = {"qpos": nxt.pipeline_state.qpos, "goal": jax.vmap(env.goal)(state.pipeline_state),
                    "reward": nxt.reward, "done": nxt.done, "alive": alive,
                    "contacts": jax.vmap(lambda d: group_contacts(env, d, groups))(nxt.pipeline_state),
@@ -80,9 +90,15 @@ def rollout(env, policy, num_episodes: int, seed: int = 0):
         return start_qpos, traj
 
     if devices == 1:
-        start, traj = jax.jit(run)(keys)
+        start, traj = jax.jit(run)(keys, models)
         return np.asarray(start), jax.tree.map(np.asarray, traj)
-    start, traj = jax.pmap(run)(keys.reshape(devices, -1, *keys.shape[1:]))
+    split = lambda x: x.reshape(devices, -1, *x.shape[1:])  # noqa: E731
+    if models is None:
+        start, traj = jax.pmap(run)(split(keys))
+    else:  # each device gets its episodes' models; the fields that are not randomized are shared
+        shards = jax.tree.map(lambda axis, x: x if axis is None else split(x), model_axes, models,
+                              is_leaf=lambda axis: axis is None)
+        start, traj = jax.pmap(run, in_axes=(0, model_axes))(split(keys), shards)
     merge = lambda x: np.moveaxis(np.asarray(x), 0, 1).reshape(x.shape[1], num_episodes, *x.shape[3:])  # noqa: E731
     return np.asarray(start).reshape(num_episodes, -1), jax.tree.map(merge, traj)
 
@@ -252,13 +268,14 @@ def navigation_rows(summary: dict) -> list[tuple[str, str]]:
 
 def evaluate(ckpt: str | Path, episodes: int = 128, videos: int = 1, out: str | Path | None = None,
              seed: int = 0, video: bool = True, task: str | None = None, shadows: bool = False,
-             **env_overrides) -> dict:
+             randomize: bool = False, **env_overrides) -> dict:
     """Load a checkpoint, run `episodes` deterministic episodes, write metrics JSON and videos.
 
     Keywords that are `EnvConfig` fields (start noise, contact cap, goal range, waypoints, episode
     length) replace the run's own setting (None keeps it). `task="navigate"` runs a report-task
     policy on the navigation task's goals. Without start noise (report task) every episode starts
-    from the same state and the episodes differ only by numerics.
+    from the same state and the episodes differ only by numerics. `randomize` runs each episode
+    on its own randomized physics (`randomization.Ranges`, as train.py --randomize draws them).
     """
     run_dir, ckpt_dir = checkpoints.resolve_checkpoint(Path(ckpt))
     cfg = config.load_config(run_dir)
@@ -271,11 +288,12 @@ def evaluate(ckpt: str | Path, episodes: int = 128, videos: int = 1, out: str | 
     check_writable(out)
     step, params = checkpoints.load_checkpoint(ckpt_dir, training.init_params(cfg, env))
     policy = training.make_inference(cfg, env, params, deterministic=True)
-    start, traj = rollout(env, policy, episodes, seed)
+    start, traj = rollout(env, policy, episodes, seed, ranges=randomization.Ranges() if randomize else None)
     table = episode_table(env, start, traj)
     run = {"task": env.name, "policy_task": cfg.task, "reward": cfg.reward, "ablate": cfg.ablate, "seed": cfg.seed,
            "start_joint_noise": env.config.start_joint_noise, "start_yaw_noise": env.start_yaw_range,
-           "max_contact_points": env.config.max_contact_points, "episode_length": env.config.episode_length}
+           "max_contact_points": env.config.max_contact_points, "episode_length": env.config.episode_length,
+           "randomized_physics": randomize, "terrain": env.config.terrain}
     if env.name == "navigate":
         run.update(goal_min_distance=env.config.goal_min_distance, goal_max_distance=env.config.goal_max_distance,
                    waypoints=[list(p) for p in env.config.waypoints])

@@ -159,3 +159,17 @@ def test_observation_noise_touches_only_sensor_values():
     scale = noise_scale("goal", 18)
     assert np.all(np.abs(diff) <= scale + 1e-6) and np.all(diff[scale == 0] == 0)
     assert np.abs(diff[31:49]).max() > 0.3  # joint velocities: +-1.5 rad/s
+
+
+def test_eval_rollout_runs_each_episode_on_its_own_model():
+    """eval.py --randomize: episodes from the same start (the report task's), with the same (zero)
+    commands, part ways only because each has its own physics (here only its payload differs)."""
+    from hexa_mjx import evaluation
+
+    env = hexa_mjx.make_env(episode_length=30)
+    hold = lambda obs, key: jp.zeros((obs.shape[0], env.action_size))  # noqa: E731
+    only_payload = randomization.Ranges(friction=(1.0, 1.0), mass_scale=(1.0, 1.0), kp_scale=(1.0, 1.0),
+                                        force_scale=(1.0, 1.0), damping_scale=(1.0, 1.0), armature_scale=(1.0, 1.0))
+    start, varied = evaluation.rollout(env, hold, 4, seed=0, ranges=only_payload)
+    assert np.ptp(start, axis=0).max() == 0  # the same start state
+    assert np.ptp(varied["qpos"][-1, :, 2]) > 1e-4  # payloads of 0 to 1.5 kg: four different torso heights
