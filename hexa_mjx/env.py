@@ -31,7 +31,7 @@ with contextlib.redirect_stdout(io.StringIO()):
     from brax.envs.base import Env, State
     from mujoco import mjx
 
-from hexa_mjx import curriculum, rewards  # noqa: E402
+from hexa_mjx import curriculum, rewards, terrain as terrains  # noqa: E402
 from hexa_mjx.env_config import EnvConfig, check_config, push_steps  # noqa: E402
 from hexa_mjx.kinematics import fell as flipped, quat_mul  # noqa: E402
 from hexa_mjx.model import RobotModel, action_to_ctrl, failed_ctrl, servo_power  # noqa: E402
@@ -236,8 +236,16 @@ class HexapodEnv(Env):
             half_yaw = 0.5 * jax.random.uniform(k_yaw, minval=-1.0, maxval=1.0) * self.start_yaw_range
             quat = quat_mul(jp.array([jp.cos(half_yaw), 0.0, 0.0, jp.sin(half_yaw)]), qpos[3:7])
             qpos = jp.concatenate([qpos[:3], quat, jp.clip(joints, self.robot.joint_lo, self.robot.joint_hi)])
+        if self.robot.terrain is not None and self.config.curriculum_levels:
+            qpos = qpos.at[:2].add(self.level_spawn(level, jax.random.fold_in(rng, 6)))
         data = data.replace(qpos=qpos, qvel=self._qvel0, ctrl=self._ctrl0, time=jp.zeros_like(data.time))
         return self.set_goal(data, self.first_goal(qpos, jax.random.fold_in(rng, 2), level))
+
+    def level_spawn(self, level, rng: jax.Array) -> jax.Array:
+        """Offset (m) of a start at the curriculum's `level` on a terrain: the centre of a random
+        square in the level's column (hexa_mjx.terrain)."""
+        centres = jp.asarray(terrains.spawn_points(), jp.float32)
+        return jp.stack([centres[level], centres[jax.random.randint(rng, (), 0, len(centres))]])
 
     def goal(self, data: mjx.Data) -> jax.Array:
         """The current goal's (x, y), m, world frame."""

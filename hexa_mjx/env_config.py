@@ -9,7 +9,7 @@ import dataclasses
 import math
 
 from hexa_mjx import robot
-from hexa_mjx.terrain import KINDS as TERRAINS
+from hexa_mjx.terrain import KINDS as TERRAINS, LEVEL_TILES
 
 
 @dataclasses.dataclass(frozen=True)
@@ -50,7 +50,8 @@ class EnvConfig:
     # cap it was trained with when evaluated on another range.
     goal_distance_cap: float = 0.0  # m
     # Navigation, training only: a curriculum of this many levels (0: none) that opens the bearing
-    # and distance ranges per environment as it reaches goals (hexa_mjx.curriculum).
+    # and distance ranges per environment as it reaches goals (hexa_mjx.curriculum); on a terrain
+    # the level also picks the column of terrain squares it starts on (hexa_mjx.terrain).
     curriculum_levels: int = 0
     # Navigation: a fixed path instead of random goals, ((x, y), ...) in metres, world frame,
     # relative to the start position. The last waypoint stays the goal once reached.
@@ -153,6 +154,9 @@ def check_config(config: EnvConfig) -> None:
                          f"got {config.curriculum_levels}")
     if config.curriculum_levels and (config.task != "navigate" or config.waypoints):
         raise ValueError("curriculum_levels applies to the navigate task's random goals only; leave it at 0")
+    if config.terrain != "flat" and config.curriculum_levels > LEVEL_TILES:
+        raise ValueError(f"on a terrain the curriculum has at most {LEVEL_TILES} levels (the terrain's columns of "
+                         f"squares), got curriculum_levels {config.curriculum_levels}")
     for point in config.waypoints:
         if len(point) != 2 or not all(math.isfinite(float(c)) for c in point):
             raise ValueError(f"a waypoint is a pair of finite coordinates x,y in metres, got {point}")

@@ -46,8 +46,8 @@ class RobotModel:
     """The compiled model of an `EnvConfig`, the geoms the rewards read, and the settled start."""
 
     def __init__(self, config: EnvConfig):
-        self.terrain = (terrains.generate(config.terrain, config.terrain_seed, config.terrain_difficulty)
-                        if config.terrain != "flat" else None)
+        self.terrain = (terrains.generate(config.terrain, config.terrain_seed, config.terrain_difficulty,
+                                          config.curriculum_levels) if config.terrain != "flat" else None)
         model = load_model(Path(config.model_path), config.max_contact_points, self.terrain)
         if config.solver_iterations is not None:
             model.opt.iterations = config.solver_iterations

@@ -10,7 +10,12 @@ MuJoCo C) see it as the floor. Kinds, at `terrain_difficulty` d in [0, 1] (1: th
 - mixed: TILE-sized patches, each bumps, slopes, steps or flat.
 
 A disc of SPAWN_RADIUS around the start stays at height 0, so the settled start pose is the
-same on every terrain. The policy observes no height map (a blind policy, as in legged_gym's
+same on every terrain.
+
+With a curriculum of `levels` (at most LEVEL_TILES), the field is cut into LEVEL_TILE squares:
+the squares of column l (along x) have difficulty (l + 1) / levels x `difficulty`, and every
+square's centre is a flat spawn disc. An environment at level l starts at the centre of a random
+square of column l (`spawn_points`), in the style of legged_gym's terrain rows. The policy observes no height map (a blind policy, as in legged_gym's
 blind rough-terrain training): it feels the ground through its joints and contacts.
 
 `ground_height(terrain, xy)` interpolates the grid bilinearly (NumPy or JAX arrays); MuJoCo
@@ -36,6 +41,8 @@ STEP_HEIGHT = 0.03  # m
 STEP_TILE = 0.5  # m
 TILE = 2.0  # m, patch size of the mixed terrain (a whole slope period, so patches meet at height 0)
 SPAWN_RADIUS = 0.5  # m, flat ground around the start
+LEVEL_TILE = 4.0  # m, the curriculum's squares (centres at multiples of the slopes' period: height 0)
+LEVEL_TILES = int(2 * HALF_SIZE // LEVEL_TILE)  # squares per row and column, so at most this many levels
 BASE_DEPTH = 0.1  # m, thickness of the heightfield's solid base below height 0
 
 
@@ -86,14 +93,27 @@ def _steps(x, y, rng, d):
     return d * STEP_HEIGHT * levels[tiles[1] - tiles[1].min(), tiles[0] - tiles[0].min()]
 
 
-def generate(kind: str, seed: int = 0, difficulty: float = 1.0) -> Terrain:
-    """The heightfield of `kind` at `seed` and `difficulty` (ValueError for an unknown kind)."""
+def spawn_points() -> np.ndarray:
+    """(LEVEL_TILES,) centres of the curriculum's squares along either axis, m."""
+    return -HALF_SIZE + LEVEL_TILE * (np.arange(LEVEL_TILES) + 0.5)
+
+
+def generate(kind: str, seed: int = 0, difficulty: float = 1.0, levels: int = 0) -> Terrain:
+    """The heightfield of `kind` at `seed` and `difficulty`, graded in `levels` columns for a
+    curriculum (0: the same difficulty everywhere). ValueError for an unknown kind or a bad size."""
     if kind not in KINDS:
         raise ValueError(f"unknown terrain {kind!r}; choose one of {list(KINDS)}")
     if not 0 <= difficulty <= 1:
         raise ValueError(f"terrain_difficulty is a fraction from 0 to 1, got {difficulty}")
+    if not 0 <= levels <= LEVEL_TILES:
+        raise ValueError(f"a terrain curriculum has at most {LEVEL_TILES} levels (the field's columns), got {levels}")
     x, y = _grid()
     rng = np.random.default_rng(seed)
+    spawns = [(0.0, 0.0)]
+    if levels:  # the generators scale by difficulty cell by cell
+        column = np.clip(np.floor((x + HALF_SIZE) / LEVEL_TILE), 0, levels - 1)
+        difficulty = difficulty * (column + 1) / levels
+        spawns = [(cx, cy) for cx in spawn_points() for cy in spawn_points()]
     makers = {"bumps": _bumps, "slopes": _slopes, "steps": _steps}
     if kind == "flat":
         heights = np.zeros_like(x)
@@ -106,7 +126,8 @@ def generate(kind: str, seed: int = 0, difficulty: float = 1.0) -> Terrain:
         heights = np.choose(choice, [layers[n] for n in names])
     else:
         heights = makers[kind](x, y, rng, difficulty)
-    heights = np.where(np.hypot(x, y) < SPAWN_RADIUS, 0.0, heights)
+    for cx, cy in spawns:
+        heights = np.where(np.hypot(x - cx, y - cy) < SPAWN_RADIUS, 0.0, heights)
     return Terrain(kind, heights.astype(np.float32))
 
 

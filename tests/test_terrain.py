@@ -92,3 +92,36 @@ def test_height_term_reads_the_ground_under_the_torso():
     args = (config, qpos, qpos, np.zeros(24), np.zeros(2), 0, 0, False, False, 0.0)
     assert rewards.terms(["height"], *args, ground=0.1)["height"] == pytest.approx(0.0)
     assert rewards.terms(["height"], *args)["height"] > 0  # on the flat floor the torso is 10 cm too high
+
+
+def test_curriculum_terrain_grades_its_columns_and_keeps_every_spawn_flat():
+    levels = 3
+    graded = terrain.generate("bumps", seed=0, levels=levels)
+    x = np.linspace(-terrain.HALF_SIZE, terrain.HALF_SIZE, graded.heights.shape[1])
+    column = np.clip(np.floor((x + terrain.HALF_SIZE) / terrain.LEVEL_TILE), 0, levels - 1)
+    tallest = [graded.heights[:, column == c].max() for c in range(levels)]
+    np.testing.assert_allclose(tallest, [terrain.BUMP_HEIGHT * (c + 1) / levels for c in range(levels)], rtol=0.05)
+    centres = terrain.spawn_points()
+    spawns = np.array([(cx + dx, cy) for cx in centres for cy in centres for dx in (-0.3, 0.0, 0.3)])
+    assert np.abs(terrain.ground_height(graded, spawns)).max() < 1e-6
+
+
+def test_curriculum_level_picks_the_start_column():
+    import jax
+    from mujoco import mjx
+
+    import hexa_mjx
+
+    env = hexa_mjx.make_env(task="navigate", terrain="slopes", curriculum_levels=3)
+    restart = jax.jit(env.restart)
+    data = mjx.make_data(env.mjx_model, impl="jax")  # a template for restart
+    centres = terrain.spawn_points()
+    for level in range(3):
+        starts = np.array([np.asarray(restart(data, jax.random.PRNGKey(k), level).qpos[:2]) for k in range(6)])
+        np.testing.assert_allclose(starts[:, 0], centres[level] + env.qpos0[0], atol=1e-5)
+        assert set(np.round(starts[:, 1] - env.qpos0[1], 4)) <= set(np.round(centres, 4))
+    flat = hexa_mjx.make_env(task="navigate", curriculum_levels=3)  # no terrain: every level starts at the origin
+    np.testing.assert_allclose(np.asarray(jax.jit(flat.restart)(data, jax.random.PRNGKey(0), 2).qpos[:2]),
+                               flat.qpos0[:2], atol=1e-6)
+    with pytest.raises(ValueError, match="at most 5 levels"):
+        hexa_mjx.make_env(task="navigate", terrain="bumps", curriculum_levels=6)
