@@ -16,7 +16,7 @@ import argparse
 import sys
 
 try:
-    from hexa_mjx import evaluation, jax_setup, nav_metrics
+    from hexa_mjx import evaluation, jax_setup, nav_metrics, terrain
     from hexa_mjx.tasks import TASKS
 except ImportError as e:  # a missing package, or a MUJOCO_GL that MuJoCo cannot use
     print(f"error: {e}", file=sys.stderr)
@@ -59,7 +59,7 @@ def main(argv=None) -> int:
     parser.add_argument("--obs_noise", type=float, default=None, help="observation noise level (1: Playground's)")
     parser.add_argument("--randomize", action="store_true",
                         help="each episode on its own randomized physics (train.py --randomize's ranges)")
-    parser.add_argument("--terrain", default=None, choices=["flat", "bumps", "slopes", "steps", "mixed"],
+    parser.add_argument("--terrain", default=None, choices=terrain.KINDS,
                         help="ground to evaluate on (default: the run's; hexa_mjx.terrain)")
     parser.add_argument("--terrain_seed", type=int, default=None, help="seed of the generated terrain (default: 0)")
     parser.add_argument("--terrain_difficulty", type=float, default=None,

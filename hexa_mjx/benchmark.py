@@ -25,7 +25,7 @@ import numpy as np
 from mujoco import rollout
 
 import hexa_mjx
-from hexa_mjx import config, jax_setup, robot
+from hexa_mjx import config, jax_setup, robot, terrain
 
 
 def _rollout_fn(batched_step, action_size: int, steps: int):
@@ -285,7 +285,7 @@ def main(argv=None) -> None:
     parser.add_argument("--compare_contacts", type=int, nargs="+", metavar="N",
                         help="also time these max_contact_points at the largest batch, in turns with the setting above")
     parser.add_argument("--compare_terrain", nargs="+", metavar="KIND",
-                        choices=["bumps", "slopes", "steps", "mixed"],
+                        choices=[kind for kind in terrain.KINDS if kind != "flat"],
                         help="also time these terrains at the largest batch, in turns with the flat floor")
     args = parser.parse_args(argv)
 

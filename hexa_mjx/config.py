@@ -14,7 +14,7 @@ from typing import Any
 
 import jax
 
-from hexa_mjx import distributed, rewards
+from hexa_mjx import distributed, rewards, terrain
 from hexa_mjx.jax_setup import devices_for
 from hexa_mjx.tasks import TASKS, make_env, task_class
 
@@ -103,7 +103,7 @@ class TrainConfig:
         "help": "observation noise, a multiple of hexa_mjx.observations.NOISE_SCALES (1: Playground's levels)"})
     terrain: str = dataclasses.field(default="flat", metadata={
         "help": "ground to train on: the flat floor, or a heightfield (hexa_mjx.terrain: 4 cm bumps, 10-degree "
-                "slopes, 3 cm steps, or patches of each)", "choices": ["flat", "bumps", "slopes", "steps", "mixed"]})
+                "slopes, 3 cm steps, or patches of each)", "choices": list(terrain.KINDS)})
     terrain_difficulty: float = dataclasses.field(default=1.0, metadata={
         "help": "the terrain's heights and slopes as a fraction of the full sizes (0 to 1)"})
     max_contact_points: int = dataclasses.field(default=0, metadata={
@@ -211,10 +211,10 @@ def reward_overrides(cfg: TrainConfig) -> dict[str, float]:
     for pair in cfg.reward_scale:
         term, sep, value = pair.partition("=")
         try:
-            overrides[term] = float(value) if sep else None
+            overrides[term] = float(value) if sep else math.nan
         except ValueError:
-            overrides[term] = None
-        if overrides[term] is None or not math.isfinite(overrides[term]):
+            overrides[term] = math.nan
+        if not math.isfinite(overrides[term]):
             raise ConfigError(f"--reward_scale {pair!r}: write TERM=VALUE with a finite number, e.g. body_contact=-30")
         if term not in rewards.TERMS:
             raise ConfigError(f"--reward_scale {pair!r}: unknown reward term {term!r}; terms are {sorted(rewards.TERMS)}")
