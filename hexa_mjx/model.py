@@ -31,7 +31,7 @@ def load_model(path: Path, max_contact_points: int = 0, terrain: terrains.Terrai
         spec.add_numeric(name="max_contact_points", data=[max_contact_points])
     if terrain is None:
         return spec.compile()
-    terrains.add_to_spec(spec, terrain, robot.FLOOR_GEOM)
+    terrains.add_to_spec(spec, terrain, robot.FLOOR_GEOM, robot.FOOT_SUFFIX, robot.TORSO_GEOM)
     return spec.compile()
 
 

@@ -44,6 +44,9 @@ SPAWN_RADIUS = 0.5  # m, flat ground around the start
 LEVEL_TILE = 4.0  # m, the curriculum's squares (centres at multiples of the slopes' period: height 0)
 LEVEL_TILES = int(2 * HALF_SIZE // LEVEL_TILE)  # squares per row and column, so at most this many levels
 BASE_DEPTH = 0.1  # m, thickness of the heightfield's solid base below height 0
+# Sphere centres under the torso box as signs of its half sizes (x, y): its four bottom corners,
+# inset by the sphere radius (the box's half height), which stand in for the box on a terrain.
+TORSO_PROXIES = ((-1, -1), (-1, 1), (1, -1), (1, 1))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -148,8 +151,9 @@ def ground_height(terrain: Terrain | None, xy):
     return (1 - fv) * ((1 - fu) * h00 + fu * h01) + fv * ((1 - fu) * h10 + fu * h11)
 
 
-def add_to_spec(spec, terrain: Terrain, floor_geom: str) -> None:
-    """Turn the MjSpec's floor geom into a heightfield of `terrain`."""
+def add_to_spec(spec, terrain: Terrain, floor_geom: str, foot_suffix: str, torso_geom: str) -> None:
+    """Turn the MjSpec's floor geom into a heightfield of `terrain` that collides with the feet
+    (geoms named `*<foot_suffix>`) and with TORSO_PROXIES spheres under the torso box only."""
     import mujoco
 
     n = terrain.heights.shape[0]
@@ -161,3 +165,21 @@ def add_to_spec(spec, terrain: Terrain, floor_geom: str) -> None:
     floor.type = mujoco.mjtGeom.mjGEOM_HFIELD
     floor.hfieldname = "terrain"
     floor.pos = [0.0, 0.0, 0.0]
+    # MJX collides a heightfield with every geom through a patch of prisms; the torso box (4 x 4
+    # prisms through the general convex collider) and the leg capsules (3 x 3) cost 6x the whole
+    # rest of the step. Spheres are cheap, so the field collides with the feet and with spheres
+    # along the bottom of the torso, as Playground's feet-only rough-terrain scenes do; the other
+    # robot geoms pass through it (they touch only after a fall, which the pose detects).
+    for geom in spec.geoms:
+        if geom.contype and geom.name != floor_geom and not geom.name.endswith(foot_suffix):
+            geom.contype = 0
+    torso = spec.geom(torso_geom)
+    if torso.type != mujoco.mjtGeom.mjGEOM_BOX:
+        raise ValueError(f"terrain: the torso geom {torso_geom!r} must be a box to place its collision spheres")
+    half = np.asarray(torso.size)
+    radius = half[2]  # m, the box's half height: each sphere's bottom is the box's bottom
+    for i, (sx, sy) in enumerate(TORSO_PROXIES):
+        pos = np.asarray(torso.pos) + [sx * (half[0] - radius), sy * (half[1] - radius), 0.0]
+        torso.parent.add_geom(name=f"{torso_geom}_terrain_{i}", type=mujoco.mjtGeom.mjGEOM_SPHERE,
+                              size=[radius, 0.0, 0.0], pos=pos.tolist(), contype=1, conaffinity=0,
+                              group=3, rgba=[0.8, 0.3, 0.3, 1.0])

@@ -125,3 +125,25 @@ def test_curriculum_level_picks_the_start_column():
                                flat.qpos0[:2], atol=1e-6)
     with pytest.raises(ValueError, match="at most 5 levels"):
         hexa_mjx.make_env(task="navigate", terrain="bumps", curriculum_levels=6)
+
+
+def test_heightfield_collides_with_feet_and_torso_spheres_only(robot_on):
+    model, flat = robot_on.mj_model, RobotModel(make_config()).mj_model
+    floor = model.geom("floor").id
+    names = [model.geom(g).name for g in range(model.ngeom)]
+    colliding = {n for g, n in enumerate(names)
+                 if g != floor and (model.geom_contype[g] & model.geom_conaffinity[floor])}
+    feet = {n for n in names if n.endswith("_foot")}
+    assert len(feet) == 6 and colliding - feet == {f"torso_terrain_{i}" for i in range(4)}
+    # The spheres add no mass: the robot weighs and swings as on the flat floor.
+    np.testing.assert_allclose(model.body_subtreemass, flat.body_subtreemass)
+    np.testing.assert_allclose(model.body_inertia, flat.body_inertia)
+    # Upside down on the flat spawn disc, the torso 1 cm into the ground: its spheres touch it
+    # (a body contact) and no foot does (the legs point up).
+    data = mujoco.MjData(model)
+    data.qpos[:] = robot_on.qpos0
+    data.qpos[2] = -0.01
+    data.qpos[3:7] = [0.0, 1.0, 0.0, 0.0]  # rolled by 180 degrees about x
+    mujoco.mj_forward(model, data)
+    touching = {names[g] for c in data.contact[: data.ncon] for g in (c.geom1, c.geom2) if g != floor and c.dist < 0}
+    assert touching and all(n.startswith("torso_terrain_") for n in touching)
