@@ -1,52 +1,134 @@
-"""Robustness sweeps on native MuJoCo: one perturbation at a time, over a grid of sizes.
+"""Robustness sweeps on native MuJoCo: one perturbation, or a grid of several, over their sizes.
 
     python -m hexa_mjx.sweeps policies/goal.onnx --sweep push --values 0 0.5 1 1.5 2 --out push.png
+    python -m hexa_mjx.sweeps policies/goal.onnx --grid friction=0.4,1.25 mass=0.8,1.2 payload=0,1.5
 
-Each value runs the same seeded episodes (`hexa_mjx.player`) with one quantity changed and
-everything else nominal (no pushes, latency or noise, whatever the policy was trained with): `push` (m/s, a kick every 3 s), `latency` (control steps), `noise`
-(observation noise level), `friction` (coefficient), `mass` (every link's mass scale) or
-`payload` (kg on the torso). It prints success and falls per value and plots them.
+Each value (or grid point) runs the same seeded episodes (`hexa_mjx.player`) with those quantities
+changed and everything else nominal (no pushes, latency or noise, whatever the policy was trained
+with): `push` (m/s, a kick every 3 s), `latency` (control steps), `noise` (observation noise
+level), `friction` (coefficient), `mass` (every link's mass scale), `payload` (kg on the torso),
+or a generated terrain at seed 0 (`hexa_mjx.terrain`) of a size: `bumps` (m, bump height),
+`slopes` (degrees) or `steps` (m, step height). It prints success and falls per value and plots
+a single sweep; `--workers` runs episodes in that many processes.
 """
 
 from __future__ import annotations
 
 import argparse
+import concurrent.futures
 import dataclasses
+import itertools
 import json
 import sys
 from pathlib import Path
 
-from hexa_mjx import player, randomization
+from hexa_mjx import player, randomization, terrain
 
 NOMINAL = randomization.Ranges(friction=(1.0, 1.0), mass_scale=(1.0, 1.0), payload=(0.0, 0.0), kp_scale=(1.0, 1.0),
                                force_scale=(1.0, 1.0), damping_scale=(1.0, 1.0), armature_scale=(1.0, 1.0))
 CLEAN = {"push_speed": 0.0, "action_latency": 0.0, "obs_noise": 0.0, "leg_failure": "none"}  # no perturbation
-SWEEPS = {  # name: (units, how a value sets the environment)
-    "push": ("m/s", lambda v: {"push_speed": v}),
-    "latency": ("control steps", lambda v: {"action_latency": v}),
-    "noise": ("x Playground's levels", lambda v: {"obs_noise": v}),
-    "friction": ("", lambda v: {"ranges": dataclasses.replace(NOMINAL, friction=(v, v))}),
-    "mass": ("x", lambda v: {"ranges": dataclasses.replace(NOMINAL, mass_scale=(v, v))}),
-    "payload": ("kg", lambda v: {"ranges": dataclasses.replace(NOMINAL, payload=(v, v))}),
+
+
+@dataclasses.dataclass(frozen=True)
+class Sweep:
+    """A swept quantity: its units and what a value sets, an `EnvConfig` field or a fixed
+    `randomization.Ranges` field; a terrain's value is a size up to `full` (its difficulty 1)."""
+
+    units: str
+    setting: str = ""
+    range_field: str = ""
+    terrain: str = ""
+    full: float = 0.0
+
+
+SWEEPS = {
+    "push": Sweep("m/s", setting="push_speed"),
+    "latency": Sweep("control steps", setting="action_latency"),
+    "noise": Sweep("x Playground's levels", setting="obs_noise"),
+    "friction": Sweep("", range_field="friction"),
+    "mass": Sweep("x", range_field="mass_scale"),
+    "payload": Sweep("kg", range_field="payload"),
+    "bumps": Sweep("m", terrain="bumps", full=terrain.BUMP_HEIGHT),
+    "slopes": Sweep("degrees", terrain="slopes", full=terrain.SLOPE_DEG),
+    "steps": Sweep("m", terrain="steps", full=terrain.STEP_HEIGHT),
 }
 
 
-def sweep(policy_path: str, name: str, values: list[float], episodes: int, seed: int = 0, **overrides) -> list[dict]:
-    """A summary (hexa_mjx.player.summarize) per value of sweep `name`."""
+def settings(point: dict[str, float]) -> tuple[dict, randomization.Ranges | None]:
+    """(EnvConfig overrides, fixed physics ranges or None) of a point {sweep name: value}."""
+    overrides, ranges = {}, None
+    for name, value in point.items():
+        if name not in SWEEPS:
+            raise ValueError(f"unknown sweep {name!r}; choose one of {sorted(SWEEPS)}")
+        sweep = SWEEPS[name]
+        if sweep.setting:
+            overrides[sweep.setting] = value
+        elif sweep.range_field:
+            ranges = dataclasses.replace(ranges or NOMINAL, **{sweep.range_field: (value, value)})
+            ranges.check()
+        else:
+            if "terrain" in overrides:
+                raise ValueError(f"a point can have one terrain, got {sorted(point)}")
+            if not 0 <= value <= sweep.full:
+                raise ValueError(f"{name} sweeps sizes from 0 to {sweep.full:g} {sweep.units} "
+                                 f"(hexa_mjx.terrain's full size), got {value:g}")
+            overrides.update(terrain=sweep.terrain, terrain_difficulty=value / sweep.full)
+    return overrides, ranges
+
+
+def _episodes(policy_path: str, overrides: dict, ranges, seeds: list[int]) -> list[dict]:
+    policy = player.OnnxPolicy(policy_path)
+    env = player.env_for(policy, **overrides)
+    if ranges is not None:
+        env.ranges = ranges
+    return [player.run_episode(policy, env, s) for s in seeds]
+
+
+def evaluate_points(policy_path: str, points: list[dict], episodes: int, seed: int = 0, workers: int = 1,
+                    **overrides) -> list[dict]:
+    """A summary (hexa_mjx.player.summarize) per point {sweep name: value}, each over the same
+    seeded episodes, run in `workers` processes."""
+    jobs = []
+    for point in points:
+        setting, ranges = settings(point)
+        player.env_for(player.OnnxPolicy(policy_path), **{**CLEAN, **overrides, **setting})  # bad input fails here
+        chunk = max(1, -(-episodes // max(workers, 1)))
+        for start in range(0, episodes, chunk):
+            jobs.append((point, {**CLEAN, **overrides, **setting}, ranges,
+                         list(range(seed + start, seed + min(episodes, start + chunk)))))
+    if workers > 1:
+        with concurrent.futures.ProcessPoolExecutor(workers) as pool:
+            results = list(pool.map(_episodes, *zip(*[(policy_path, o, r, s) for _, o, r, s in jobs])))
+    else:
+        results = [_episodes(policy_path, o, r, s) for _, o, r, s in jobs]
+    rows = []
+    for point in points:
+        done = [e for (p, *_), result in zip(jobs, results) if p is point for e in result]
+        rows.append({**point, **player.summarize(done)})
+    return rows
+
+
+def sweep(policy_path: str, name: str, values: list[float], episodes: int, seed: int = 0, workers: int = 1,
+          **overrides) -> list[dict]:
+    """A summary per value of sweep `name` (rows carry it as "value")."""
     if name not in SWEEPS:
         raise ValueError(f"unknown sweep {name!r}; choose one of {sorted(SWEEPS)}")
-    policy = player.OnnxPolicy(policy_path)
-    rows = []
-    for value in values:
-        setting = SWEEPS[name][1](value)
-        ranges = setting.pop("ranges", None)
-        env = player.env_for(policy, **{**CLEAN, **overrides, **setting})
-        if ranges is not None:
-            ranges.check()
-            env.ranges = ranges
-        rows.append({"value": value, **player.summarize([player.run_episode(policy, env, seed + i)
-                                                          for i in range(episodes)])})
-    return rows
+    rows = evaluate_points(policy_path, [{name: v} for v in values], episodes, seed, workers, **overrides)
+    return [{"value": row.pop(name), **row} for row in rows]
+
+
+def parse_grid(items: list[str]) -> dict[str, list[float]]:
+    """{"friction": [0.4, 1.25], ...} from ["friction=0.4,1.25", ...]."""
+    grid = {}
+    for item in items:
+        name, _, values = item.partition("=")
+        if name not in SWEEPS or not values:
+            raise ValueError(f"--grid takes NAME=V1,V2,... with NAME one of {sorted(SWEEPS)}, got {item!r}")
+        try:
+            grid[name] = [float(v) for v in values.split(",")]
+        except ValueError:
+            raise ValueError(f"--grid {name}: values are numbers separated by commas, got {values!r}") from None
+    return grid
 
 
 def plot(rows: list[dict], name: str, out: Path, title: str = "") -> Path:
@@ -63,7 +145,7 @@ def plot(rows: list[dict], name: str, out: Path, title: str = "") -> Path:
     ax.plot(values, [r["success_rate"] for r in rows], "o-", label="success")
     ax.plot(values, [1 - r["fall_rate"] for r in rows], "s--", label="no fall")
     ax.set_ylim(-0.05, 1.05)
-    ax.set_xlabel(f"{name} ({SWEEPS[name][0]})" if SWEEPS[name][0] else name)
+    ax.set_xlabel(f"{name} ({SWEEPS[name].units})" if SWEEPS[name].units else name)
     ax.grid(alpha=0.3)
     ax.legend()
     if title:
@@ -71,32 +153,57 @@ def plot(rows: list[dict], name: str, out: Path, title: str = "") -> Path:
     return save_figure(fig, out)
 
 
+def table(rows: list[dict], names: list[str]) -> str:
+    """Markdown: the point's values, success, falls, speed to the goal."""
+    lines = [f"| {' | '.join(names)} | success | falls | speed to the goal |",
+             "|" + "---|" * (len(names) + 3)]
+    for r in rows:
+        speed = r["speed_to_first_goal"]
+        lines.append(f"| {' | '.join(f'{r[n]:g}' for n in names)} | {r['success_rate']:.0%} | {r['fall_rate']:.0%} | "
+                     f"{'-' if speed is None else f'{speed:.3f} m/s'} |")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m hexa_mjx.sweeps", description=__doc__.split("\n\n")[0])
     p.add_argument("policy", help="exported .onnx policy")
-    p.add_argument("--sweep", required=True, choices=sorted(SWEEPS))
-    p.add_argument("--values", type=float, nargs="+", required=True)
-    p.add_argument("--episodes", type=int, default=64)
+    p.add_argument("--sweep", choices=sorted(SWEEPS), help="one quantity, over --values")
+    p.add_argument("--values", type=float, nargs="+")
+    p.add_argument("--grid", nargs="+", default=None,
+                   help="every combination of several, e.g. friction=0.4,1.25 mass=0.8,1.2 payload=0,1.5")
+    p.add_argument("--episodes", type=int, default=64, help="per value or grid point")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--workers", type=int, default=1, help="processes running episodes (one per core)")
     p.add_argument("--start_joint_noise", type=float, default=None, help="rad (default: the policy's training)")
-    p.add_argument("--out", default="", help="PNG plot to write (and .json beside it)")
+    p.add_argument("--out", default="", help="PNG plot to write (a sweep) and .json beside it")
     args = p.parse_args(argv)
-    if args.episodes < 1:
-        p.error("--episodes must be at least 1")
+    if args.episodes < 1 or args.workers < 1:
+        p.error("--episodes and --workers must be at least 1")
+    if (args.sweep is None) == (args.grid is None) or (args.sweep is not None) != (args.values is not None):
+        p.error("give either --sweep NAME --values ... or --grid NAME=V1,V2 ...")
     try:
-        rows = sweep(args.policy, args.sweep, args.values, args.episodes, args.seed,
-                     start_joint_noise=args.start_joint_noise)
+        if args.grid is not None:
+            grid = parse_grid(args.grid)
+            names = list(grid)
+            points = [dict(zip(names, combo)) for combo in itertools.product(*grid.values())]
+            rows = evaluate_points(args.policy, points, args.episodes, args.seed, args.workers,
+                                   start_joint_noise=args.start_joint_noise)
+        else:
+            names = ["value"]
+            rows = sweep(args.policy, args.sweep, args.values, args.episodes, args.seed, args.workers,
+                         start_joint_noise=args.start_joint_noise)
     except (FileNotFoundError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    print(f"| {args.sweep} | success | falls | speed to the goal |\n|---|---|---|---|")
-    for r in rows:
-        speed = r["speed_to_first_goal"]
-        print(f"| {r['value']:g} | {r['success_rate']:.0%} | {r['fall_rate']:.0%} | "
-              f"{'-' if speed is None else f'{speed:.3f} m/s'} |")
+    print(table(rows, names) if args.grid is not None else table(rows, names).replace("| value |", f"| {args.sweep} |", 1))
+    if args.grid is not None:
+        worst = min(rows, key=lambda r: r["success_rate"])
+        print(f"worst point: {', '.join(f'{n}={worst[n]:g}' for n in names)}: {worst['success_rate']:.0%} success")
     if args.out:
         out = Path(args.out)
-        plot(rows, args.sweep, out, f"{Path(args.policy).name}, {args.episodes} episodes per value")
+        out.parent.mkdir(parents=True, exist_ok=True)
+        if args.sweep:
+            plot(rows, args.sweep, out, f"{Path(args.policy).name}, {args.episodes} episodes per value")
         out.with_suffix(".json").write_text(json.dumps(rows, indent=1))
     return 0
 

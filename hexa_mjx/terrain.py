@@ -5,12 +5,12 @@ heightfield geom of the same name, so the contact rules, the renderer and both e
 MuJoCo C) see it as the floor. Kinds, at `terrain_difficulty` d in [0, 1] (1: the sizes below):
 
 - bumps: smoothed random bumps from 0 to d x BUMP_HEIGHT;
-- slopes: ridges and valleys whose slope is d x SLOPE_DEG everywhere (a triangle wave in x and y);
+- slopes: pyramids on SLOPE_PERIOD squares whose sides slope at d x SLOPE_DEG;
 - steps: tiles of STEP_TILE at whole multiples of d x STEP_HEIGHT (0 to 2 steps up);
 - mixed: TILE-sized patches, each bumps, slopes, steps or flat.
 
 A disc of SPAWN_RADIUS around the start stays at height 0, so the settled start pose is the
-same on every terrain.
+same on every terrain; the terrain rises from it by ramps no steeper than d x SLOPE_DEG.
 
 With a curriculum of `levels` (at most LEVEL_TILES), the field is cut into LEVEL_TILE squares:
 the squares of column l (along x) have difficulty (l + 1) / levels x `difficulty`, and every
@@ -36,7 +36,7 @@ HALF_SIZE = 10.0  # m, the heightfield spans +-this in x and y around the start
 CELL = 0.1  # m, grid spacing; MJX collides each geom with a patch of cells around it
 BUMP_HEIGHT = 0.04  # m
 SLOPE_DEG = 10.0  # degrees
-SLOPE_PERIOD = 2.0  # m, one ridge-to-ridge cycle of the slopes
+SLOPE_PERIOD = 2.0  # m, the side of a slope's pyramid
 STEP_HEIGHT = 0.03  # m
 STEP_TILE = 0.5  # m
 TILE = 2.0  # m, patch size of the mixed terrain (a whole slope period, so patches meet at height 0)
@@ -85,9 +85,10 @@ def _bumps(x, y, rng, d):
 
 
 def _slopes(x, y, rng, d):
-    # tan(angle) x (tri(x) + tri(y)) / sqrt(2): the gradient's size is tan(angle) off the ridges.
+    # Pyramids on SLOPE_PERIOD squares (legged_gym's pyramid slopes): height tan(angle) x the
+    # distance to the square's nearest edge, so every edge is at height 0 and the slope is the angle.
     grade = np.tan(np.radians(d * SLOPE_DEG))
-    return grade * (_triangle(x, SLOPE_PERIOD) + _triangle(y, SLOPE_PERIOD)) / np.sqrt(2.0)
+    return grade * np.minimum(_triangle(x, SLOPE_PERIOD), _triangle(y, SLOPE_PERIOD))
 
 
 def _steps(x, y, rng, d):
@@ -129,8 +130,10 @@ def generate(kind: str, seed: int = 0, difficulty: float = 1.0, levels: int = 0)
         heights = np.choose(choice, [layers[n] for n in names])
     else:
         heights = makers[kind](x, y, rng, difficulty)
-    for cx, cy in spawns:
-        heights = np.where(np.hypot(x - cx, y - cy) < SPAWN_RADIUS, 0.0, heights)
+    # Flat discs at the starts that meet the terrain by ramps no steeper than the slopes of the same
+    # difficulty, not by a cliff: every kind is >= 0, and the minimum with a cone keeps a slope's angle.
+    off_disc = np.min([np.hypot(x - cx, y - cy) for cx, cy in spawns], axis=0) - SPAWN_RADIUS
+    heights = np.minimum(heights, np.tan(np.radians(difficulty * SLOPE_DEG)) * np.maximum(off_disc, 0.0))
     return Terrain(kind, heights.astype(np.float32))
 
 

@@ -240,3 +240,26 @@ def test_robustness_sweep_changes_one_quantity(tmp_path):
     with pytest.raises(ValueError, match="unknown sweep"):
         sweeps.sweep("policies/goal.onnx", "gravity", [1.0], episodes=1)
     assert sweeps.main(["policies/goal.onnx", "--sweep", "friction", "--values", "-1", "--episodes", "1"]) == 2
+
+
+def test_grid_points_set_each_quantity_and_workers_change_nothing():
+    from hexa_mjx import player, sweeps, terrain
+
+    overrides, ranges = sweeps.settings({"friction": 0.4, "payload": 1.5, "slopes": 5.0, "push": 0.5})
+    env = player.env_for(player.OnnxPolicy("policies/goal.onnx"), **overrides)
+    env.ranges = ranges
+    nominal_mass = env.mj_model.body_subtreemass[env.robot.torso]
+    env.reset(seed=0)
+    torso = env.robot.torso
+    assert env.mj_model.body_subtreemass[torso] == pytest.approx(nominal_mass + 1.5)
+    assert np.all(env.mj_model.geom_friction[:, 0] == pytest.approx(0.4)) and env.config.push_speed == 0.5
+    heights = env.robot.terrain.heights  # half the full slope: 5 degrees off the ridges
+    assert np.degrees(np.arctan(np.abs(np.diff(heights, axis=1)).max() / terrain.CELL)) == pytest.approx(5.0, abs=0.5)
+    for bad, match in [({"bumps": 0.05}, "from 0 to 0.04 m"), ({"bumps": 0.01, "steps": 0.01}, "one terrain"),
+                       ({"mass": -1.0}, "low <= high")]:
+        with pytest.raises(ValueError, match=match):
+            sweeps.settings(bad)
+    points = [{"mass": 0.8}, {"mass": 1.2}]
+    alone = sweeps.evaluate_points("policies/goal.onnx", points, episodes=2, episode_length=60)
+    pooled = sweeps.evaluate_points("policies/goal.onnx", points, episodes=2, workers=2, episode_length=60)
+    assert alone == pooled and [r["mass"] for r in alone] == [0.8, 1.2] and alone[0]["episodes"] == 2

@@ -50,12 +50,17 @@ def test_terrain_sizes_follow_the_kind_and_difficulty():
     # Off the ridges, valleys and the flat spawn disc, the slope is SLOPE_DEG.
     angle = np.degrees(np.arctan(np.hypot(gx, gy)))
     assert np.median(angle[angle > 1]) == pytest.approx(terrain.SLOPE_DEG, abs=0.2)
+    assert angle.max() < terrain.SLOPE_DEG + 0.1 and slopes.heights[::20, ::20].max() == pytest.approx(0.0)  # edges at 0
     steps = terrain.generate("steps", seed=2).heights
-    assert set(np.round(np.unique(steps) / terrain.STEP_HEIGHT, 6)) == {0.0, 1.0, 2.0}
+    grid = np.linspace(-terrain.HALF_SIZE, terrain.HALF_SIZE, steps.shape[0])
+    beyond_ramp = np.hypot(*np.meshgrid(grid, grid)) > 1.0  # 2 steps = 6 cm, 0.34 m of ramp past the disc
+    assert set(np.round(np.unique(steps[beyond_ramp]) / terrain.STEP_HEIGHT, 6)) == {0.0, 1.0, 2.0}
     assert not np.array_equal(terrain.generate("bumps", seed=1).heights, bumps.heights)  # the seed matters
-    for kind in terrain.KINDS:  # the start stays flat, so the settled pose is the same everywhere
-        t = terrain.generate(kind, seed=5)
+    for kind in terrain.KINDS:  # the start stays flat, so the settled pose is the same everywhere,
+        t = terrain.generate(kind, seed=5)  # and the terrain rises from it by no more than SLOPE_DEG
         assert terrain.ground_height(t, np.array([[0.0, 0.0], [0.3, -0.3]])) == pytest.approx(0.0)
+        off_disc = np.hypot(*np.meshgrid(grid, grid)) - terrain.SPAWN_RADIUS
+        assert np.all(t.heights <= np.tan(np.radians(terrain.SLOPE_DEG)) * np.maximum(off_disc, 0) + 1e-6)
     with pytest.raises(ValueError, match="unknown terrain 'lava'"):
         terrain.generate("lava")
 
