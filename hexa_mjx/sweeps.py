@@ -7,7 +7,7 @@ Each value (or grid point) runs the same seeded episodes (`hexa_mjx.player`) wit
 changed and everything else nominal (no pushes, latency or noise, whatever the policy was trained
 with): `push` (m/s, a kick every 3 s), `latency` (control steps), `noise` (observation noise
 level), `friction` (coefficient), `mass` (every link's mass scale), `payload` (kg on the torso),
-or a generated terrain at seed 0 (`hexa_mjx.terrain`) of a size: `bumps` (m, bump height),
+or a generated terrain (`hexa_mjx.terrain`, at `--terrain_seed`) of a size: `bumps` (m, bump height),
 `slopes` (degrees) or `steps` (m, step height). It prints success and falls per value and plots
 a single sweep; `--workers` runs episodes in that many processes.
 """
@@ -175,23 +175,26 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--workers", type=int, default=1, help="processes running episodes (one per core)")
     p.add_argument("--start_joint_noise", type=float, default=None, help="rad (default: the policy's training)")
+    p.add_argument("--terrain", default=None, choices=terrain.KINDS,
+                   help="ground of the sweeps that are not terrains (default: the policy's training ground)")
+    p.add_argument("--terrain_seed", type=int, default=None,
+                   help="seed of the terrains swept (default: the policy's training terrain's, 0)")
     p.add_argument("--out", default="", help="PNG plot to write (a sweep) and .json beside it")
     args = p.parse_args(argv)
     if args.episodes < 1 or args.workers < 1:
         p.error("--episodes and --workers must be at least 1")
     if (args.sweep is None) == (args.grid is None) or (args.sweep is not None) != (args.values is not None):
         p.error("give either --sweep NAME --values ... or --grid NAME=V1,V2 ...")
+    where = dict(start_joint_noise=args.start_joint_noise, terrain=args.terrain, terrain_seed=args.terrain_seed)
     try:
         if args.grid is not None:
             grid = parse_grid(args.grid)
             names = list(grid)
             points = [dict(zip(names, combo)) for combo in itertools.product(*grid.values())]
-            rows = evaluate_points(args.policy, points, args.episodes, args.seed, args.workers,
-                                   start_joint_noise=args.start_joint_noise)
+            rows = evaluate_points(args.policy, points, args.episodes, args.seed, args.workers, **where)
         else:
             names = ["value"]
-            rows = sweep(args.policy, args.sweep, args.values, args.episodes, args.seed, args.workers,
-                         start_joint_noise=args.start_joint_noise)
+            rows = sweep(args.policy, args.sweep, args.values, args.episodes, args.seed, args.workers, **where)
     except (FileNotFoundError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

@@ -240,6 +240,10 @@ def test_robustness_sweep_changes_one_quantity(tmp_path):
     with pytest.raises(ValueError, match="unknown sweep"):
         sweeps.sweep("policies/goal.onnx", "gravity", [1.0], episodes=1)
     assert sweeps.main(["policies/goal.onnx", "--sweep", "friction", "--values", "-1", "--episodes", "1"]) == 2
+    assert sweeps.main(["policies/goal.onnx", "--grid", "gravity=1,2", "--episodes", "1"]) == 2
+    assert sweeps.main(["policies/goal.onnx", "--grid", "mass=heavy", "--episodes", "1"]) == 2
+    with pytest.raises(SystemExit):  # a sweep and a grid at once
+        sweeps.main(["policies/goal.onnx", "--grid", "mass=1", "--sweep", "push", "--values", "1"])
 
 
 def test_grid_points_set_each_quantity_and_workers_change_nothing():
