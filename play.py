@@ -5,6 +5,7 @@
     python play.py --policy policies/navigate.onnx --waypoints "2,0 2,2 0,2 0,0" --episode_length 1500
     python play.py --policy policies/navigate.onnx --viewer          # drag the goal around
     python play.py --policy runs/goal_directed-s0                    # a run or checkpoint (exports it first)
+    python play.py --policy policies/navigate.onnx --terrain bumps --terrain_seed 1 --episodes 64 --no_video
 
 With an ONNX file, this imports only mujoco, onnxruntime and NumPy (and imageio for the video).
 """
@@ -17,6 +18,12 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+
+def terrain_kinds() -> tuple[str, ...]:
+    from hexa_mjx.terrain import KINDS  # NumPy only
+
+    return KINDS
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -44,6 +51,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--obs_noise", type=float, default=None, help="observation noise level (1: Playground's)")
     p.add_argument("--disabled_legs", default="", help='legs whose servos fail, e.g. "3" or "1 4"')
     p.add_argument("--failure_mode", default=None, choices=["limp", "locked"], help="how a failed leg fails")
+    p.add_argument("--terrain", default=None, choices=terrain_kinds(),
+                   help="ground: flat or a generated heightfield (default: the policy's training ground)")
+    p.add_argument("--terrain_seed", type=int, default=None, help="seed of the generated terrain (default: 0)")
+    p.add_argument("--terrain_difficulty", type=float, default=None, help="terrain sizes as a fraction, 0 to 1")
     p.add_argument("--solver", default="trained", choices=["trained", "default"],
                    help="'trained': the model's fast solver setting (1 iteration); 'default': MuJoCo's default "
                         "accuracy (100 iterations, 50 line-search), the sim-to-sim check")
@@ -102,7 +113,8 @@ def main(argv=None) -> int:
                          start_joint_noise=args.start_joint_noise, start_yaw_noise=args.start_yaw_noise,
                          waypoints=waypoints_of(args.waypoints) or None, push_speed=args.push_speed,
                          push_interval=args.push_interval, failure_mode=args.failure_mode,
-                         action_latency=args.action_latency, obs_noise=args.obs_noise)
+                         action_latency=args.action_latency, obs_noise=args.obs_noise, terrain=args.terrain,
+                         terrain_seed=args.terrain_seed, terrain_difficulty=args.terrain_difficulty)
         if args.solver == "default":
             overrides.update(solver_iterations=100, ls_iterations=50)  # MuJoCo's defaults
         if args.disabled_legs:

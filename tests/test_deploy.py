@@ -177,6 +177,7 @@ def test_play_bad_input_is_one_line(tmp_path):
         ("policies/navigate.onnx", "--waypoints", "1,x"): "waypoints are",
         ("policies/goal.onnx", "--episodes", "0"): "--episodes must be at least 1",
         ("policies/goal.onnx", "--goal_distance", "-1"): "goal_distance must be",
+        ("policies/goal.onnx", "--terrain", "bumps", "--terrain_difficulty", "2"): "terrain_difficulty is a fraction",
     }
     for args, message in cases.items():
         proc = run_play("--policy", *args, "--no_video")
