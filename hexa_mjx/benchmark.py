@@ -2,6 +2,7 @@
 
     python -m hexa_mjx.benchmark [--batches 64 256 1024] [--steps 100] [--repeats 3] [--compare_solver 4 8]
                                  [--profile] [--train] [--max_contact_points N] [--compare_contacts N ...]
+                                 [--compare_terrain KIND ...] [--compare_randomize]
 
 Prints compile time, then for each batch size the median over repeats of env
 steps/s and physics steps/s (env steps x substeps) under random actions, then
@@ -9,7 +10,9 @@ MuJoCo C's single-thread physics steps/s on the same model (mujoco.rollout) and
 the MJX/C ratio. Everything is measured in one run, side by side. --profile splits
 one PPO update into its parts; --train times end-to-end PPO beside the environment
 alone, on one device and on one CPU device per core. --compare_contacts times
-MJX contact caps (`EnvConfig.max_contact_points`) in turns with the model's setting.
+MJX contact caps (`EnvConfig.max_contact_points`) in turns with the model's setting,
+--compare_terrain heightfields against the flat floor, --compare_randomize a randomized
+model per environment against the nominal one.
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ import numpy as np
 from mujoco import rollout
 
 import hexa_mjx
-from hexa_mjx import config, jax_setup, robot, terrain
+from hexa_mjx import config, jax_setup, randomization, robot, terrain, wrappers
 
 
 def _rollout_fn(batched_step, action_size: int, steps: int):
@@ -48,13 +51,26 @@ def mjx_speed(env, batch: int, steps: int, repeats: int) -> dict:
             "physics_steps_per_s": env_rate * env.n_substeps}
 
 
+def randomized(env):
+    """A batch factory for `compare_speed`: `env` with its own randomized physics model per
+    environment (train.py --randomize's ranges and wrapper)."""
+    def batched(batch: int):
+        draw = randomization.randomization_fn(env, randomization.Ranges())
+        return wrappers.RandomizedVmap(env, lambda model: draw(model, jax.random.split(jax.random.PRNGKey(3), batch)))
+    batched.action_size = env.action_size
+    return batched
+
+
 def compare_speed(envs: dict, batch: int, steps: int, repeats: int) -> dict:
-    """(compile s, median env steps/s) of each named env at one batch size, timed in turns (one
-    rollout of each per round) so that a noisy, shared machine slows them alike."""
+    """(compile s, median env steps/s) of each named env (or batch factory, `randomized`) at one
+    batch size, timed in turns (one rollout of each per round) so that a noisy, shared machine
+    slows them alike."""
     runs, compile_s, rates = {}, {}, {name: [] for name in envs}
     for name, env in envs.items():
-        run = _rollout_fn(jax.vmap(env.step), env.action_size, steps)
-        state = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(0), batch))
+        step, reset = ((jax.vmap(env.step), jax.vmap(env.reset)) if hasattr(env, "step")
+                       else (lambda b: (b.step, b.reset))(env(batch)))
+        run = _rollout_fn(step, env.action_size, steps)
+        state = jax.jit(reset)(jax.random.split(jax.random.PRNGKey(0), batch))
         t0 = time.perf_counter()
         runs[name] = (run, jax.block_until_ready(run(state, jax.random.PRNGKey(1))))
         compile_s[name] = time.perf_counter() - t0
@@ -287,6 +303,9 @@ def main(argv=None) -> None:
     parser.add_argument("--compare_terrain", nargs="+", metavar="KIND",
                         choices=[kind for kind in terrain.KINDS if kind != "flat"],
                         help="also time these terrains at the largest batch, in turns with the flat floor")
+    parser.add_argument("--compare_randomize", action="store_true",
+                        help="also time randomized physics (one model per environment) at the largest batch, in "
+                             "turns with the nominal model")
     args = parser.parse_args(argv)
 
     jax_setup.prepare_jax()  # as train.py does; single-device timings use one of the CPU devices
@@ -318,6 +337,13 @@ def main(argv=None) -> None:
         print(f"contact points kept, env steps/s at {args.batches[-1]} envs (timed in turns, median of {args.repeats}):")
         for n, (_, rate) in rates.items():
             print(f"  max_contact_points={n:<3} ({envs[n].contact_slots} slots) {rate:8.0f}  {rate / base:5.2f}x")
+    if args.compare_randomize:
+        rates = compare_speed({"nominal": env, "randomized": randomized(env)}, args.batches[-1], args.steps,
+                              args.repeats)
+        base = rates["nominal"][1]
+        print(f"domain randomization, env steps/s at {args.batches[-1]} envs (timed in turns, median of {args.repeats}):")
+        for name, (compile_s, rate) in rates.items():
+            print(f"  {name:<10} {rate:8.0f}  {rate / base:5.2f}x  compile {compile_s:.0f} s")
     if args.compare_terrain:
         envs = {kind: hexa_mjx.make_env(ctrl_hz=args.ctrl_hz, terrain=kind, **cap)
                 for kind in ["flat", *args.compare_terrain]}
