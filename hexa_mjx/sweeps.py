@@ -19,6 +19,7 @@ import concurrent.futures
 import dataclasses
 import itertools
 import json
+import multiprocessing
 import sys
 from pathlib import Path
 
@@ -97,7 +98,8 @@ def evaluate_points(policy_path: str, points: list[dict], episodes: int, seed: i
             jobs.append((point, {**CLEAN, **overrides, **setting}, ranges,
                          list(range(seed + start, seed + min(episodes, start + chunk)))))
     if workers > 1:
-        with concurrent.futures.ProcessPoolExecutor(workers) as pool:
+        # spawn, not fork: the caller may hold JAX's or onnxruntime's threads, which a fork copies mid-flight
+        with concurrent.futures.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
             results = list(pool.map(_episodes, *zip(*[(policy_path, o, r, s) for _, o, r, s in jobs])))
     else:
         results = [_episodes(policy_path, o, r, s) for _, o, r, s in jobs]
