@@ -20,12 +20,6 @@ import time
 from pathlib import Path
 
 
-def terrain_kinds() -> tuple[str, ...]:
-    from hexa_mjx.terrain import KINDS  # NumPy only
-
-    return KINDS
-
-
 def parse_args(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--policy", required=True, help="exported .onnx file, run directory or checkpoint folder")
@@ -51,8 +45,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--obs_noise", type=float, default=None, help="observation noise level (1: Playground's)")
     p.add_argument("--disabled_legs", default="", help='legs whose servos fail, e.g. "3" or "1 4"')
     p.add_argument("--failure_mode", default=None, choices=["limp", "locked"], help="how a failed leg fails")
-    p.add_argument("--terrain", default=None, choices=terrain_kinds(),
-                   help="ground: flat or a generated heightfield (default: the policy's training ground)")
+    # No choices= here: hexa_mjx is imported only after the arguments (an unusable MUJOCO_GL stops
+    # that import with one line); EnvConfig rejects an unknown kind with the list.
+    p.add_argument("--terrain", default=None,
+                   help="ground: flat, bumps, slopes, steps or mixed (hexa_mjx.terrain; default: the policy's)")
     p.add_argument("--terrain_seed", type=int, default=None, help="seed of the generated terrain (default: 0)")
     p.add_argument("--terrain_difficulty", type=float, default=None, help="terrain sizes as a fraction, 0 to 1")
     p.add_argument("--solver", default="trained", choices=["trained", "default"],
