@@ -89,11 +89,10 @@ def evaluate_points(policy_path: str, points: list[dict], episodes: int, seed: i
                     **overrides) -> list[dict]:
     """A summary (hexa_mjx.player.summarize) per point {sweep name: value}, each over the same
     seeded episodes, run in `workers` processes."""
-    jobs = []
+    jobs, chunk = [], max(1, -(-episodes // max(workers, 1)))
     for point in points:
         setting, ranges = settings(point)
         player.env_for(player.OnnxPolicy(policy_path), **{**CLEAN, **overrides, **setting})  # bad input fails here
-        chunk = max(1, -(-episodes // max(workers, 1)))
         for start in range(0, episodes, chunk):
             jobs.append((point, {**CLEAN, **overrides, **setting}, ranges,
                          list(range(seed + start, seed + min(episodes, start + chunk)))))
@@ -112,9 +111,7 @@ def evaluate_points(policy_path: str, points: list[dict], episodes: int, seed: i
 
 def sweep(policy_path: str, name: str, values: list[float], episodes: int, seed: int = 0, workers: int = 1,
           **overrides) -> list[dict]:
-    """A summary per value of sweep `name` (rows carry it as "value")."""
-    if name not in SWEEPS:
-        raise ValueError(f"unknown sweep {name!r}; choose one of {sorted(SWEEPS)}")
+    """A summary per value of sweep `name` (rows carry it as "value"); `settings` rejects an unknown name."""
     rows = evaluate_points(policy_path, [{name: v} for v in values], episodes, seed, workers, **overrides)
     return [{"value": row.pop(name), **row} for row in rows]
 
@@ -155,9 +152,9 @@ def plot(rows: list[dict], name: str, out: Path, title: str = "") -> Path:
     return save_figure(fig, out)
 
 
-def table(rows: list[dict], names: list[str]) -> str:
-    """Markdown: the point's values, success, falls, speed to the goal."""
-    lines = [f"| {' | '.join(names)} | success | falls | speed to the goal |",
+def table(rows: list[dict], names: list[str], headers: list[str] | None = None) -> str:
+    """Markdown: the point's values (keys `names`, titled `headers`), success, falls, speed to the goal."""
+    lines = [f"| {' | '.join(headers or names)} | success | falls | speed to the goal |",
              "|" + "---|" * (len(names) + 3)]
     for r in rows:
         speed = r["speed_to_first_goal"]
@@ -200,7 +197,7 @@ def main(argv=None) -> int:
     except (FileNotFoundError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    print(table(rows, names) if args.grid is not None else table(rows, names).replace("| value |", f"| {args.sweep} |", 1))
+    print(table(rows, names, None if args.grid is not None else [args.sweep]))
     if args.grid is not None:
         worst = min(rows, key=lambda r: r["success_rate"])
         print(f"worst point: {', '.join(f'{n}={worst[n]:g}' for n in names)}: {worst['success_rate']:.0%} success")
