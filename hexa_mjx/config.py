@@ -46,6 +46,9 @@ class TrainConfig:
         "help": "run directory (default runs/<reward>[-no_<ablation>]-s<seed>)"})
     num_evals: int = dataclasses.field(default=10, metadata={"help": "evaluations (and checkpoints) over the run"})
     resume: bool = dataclasses.field(default=False, metadata={"help": "continue the run in --run_dir"})
+    init_from: str = dataclasses.field(default="", metadata={
+        "help": "fine-tune: start from the params of this run directory's latest checkpoint (or of one checkpoint "
+                "folder), with Adam afresh and step 0; its task, model and network sizes must match"})
     preset: str = dataclasses.field(default="", metadata={
         "help": "named settings: 'paper' = the report's 8 envs x 2048 steps, minibatch 64; 'fast' = 4 epochs "
                 "and [128, 128] networks, the quickest to a walking policy on a CPU", "choices": ["fast", "paper"]})
@@ -256,9 +259,32 @@ def validate(cfg: TrainConfig, writes: bool = True) -> TrainConfig:
         raise ConfigError(f"--model {cfg.model} is not a file; convert a URDF with "
                           f"`python -m hexa_mjx.convert URDF -o {cfg.model}`")
     make_env_for(cfg, curriculum_levels=cfg.curriculum_levels)  # a bad ctrl_hz, task or reward raises here
+    if cfg.init_from:
+        init_checkpoint(cfg)
     if writes:
         check_run_dir(cfg, run_dir)
     return cfg
+
+
+# What fixes the shapes of a run's params: a fine-tuning run must match its source in these.
+PARAM_SHAPE = ("task", "model", "hidden", "policy_dist")
+
+
+def init_checkpoint(cfg: TrainConfig) -> Path:
+    """The checkpoint folder --init_from names; ConfigError if there is none or its networks differ."""
+    from hexa_mjx.checkpoints import resolve_checkpoint
+
+    try:
+        source_dir, checkpoint = resolve_checkpoint(Path(cfg.init_from))
+    except FileNotFoundError as e:
+        raise ConfigError(f"--init_from: {e}; give a run directory or one of its checkpoints/<step> folders") from None
+    source = load_config(source_dir)
+    differ = [f"{k} {getattr(source, k)!r} there, {getattr(cfg, k)!r} here" for k in PARAM_SHAPE
+              if getattr(source, k) != getattr(cfg, k)]
+    if differ:
+        raise ConfigError(f"--init_from {cfg.init_from}: its params do not fit this run ({'; '.join(differ)}); "
+                          "set the same values or train from scratch")
+    return checkpoint
 
 
 def check_run_dir(cfg: TrainConfig, run_dir: Path) -> None:

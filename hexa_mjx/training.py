@@ -19,8 +19,9 @@ import jax.numpy as jp
 from flax import linen
 
 from hexa_mjx import distributed, faults, randomization
-from hexa_mjx.checkpoints import checkpoint_dir, list_checkpoints, load_latest, remove_temporaries, save_checkpoint
-from hexa_mjx.config import TrainConfig, make_env_for, validate
+from hexa_mjx.checkpoints import (checkpoint_dir, list_checkpoints, load_checkpoint, load_latest, remove_temporaries,
+                                  save_checkpoint)
+from hexa_mjx.config import TrainConfig, init_checkpoint, make_env_for, validate
 from hexa_mjx.curriculum import LevelHistogram
 from hexa_mjx.jax_setup import devices_for, prepare_jax
 from hexa_mjx.optimizer_state import AdamRecorder, adam_template, recording
@@ -140,6 +141,9 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
     start_step, restore, optimizer, logged = 0, None, None, set()
     if main:
         start_step, restore, optimizer = resume_point(cfg, run_dir, template, optimizer_template)
+        if restore is None and cfg.init_from:  # a fine-tuning run's own checkpoints come first on resume
+            source_step, restore = load_checkpoint(init_checkpoint(cfg), template)
+            print(f"starting from the params of {cfg.init_from} (its step {source_step:,}); Adam starts afresh")
         # One row per evaluation: rows past the checkpoint go, and the checkpoint's own evaluation is
         # logged again only if its row is missing (a run from before rows were written first).
         logged = keep_rows_up_to(run_dir, start_step)

@@ -24,6 +24,7 @@ NAV_POLICY = str(ROOT / "policies" / "navigate")
 
 TRAIN_CASES = [
     (["--lr", "nan"], "--lr must be a finite number"),
+    (["--init_from", "runs/no-such-run"], "--init_from: runs/no-such-run is neither a run directory"),
     (["--lr", "-1"], "--lr must be a finite number in (0, inf)"),
     (["--lr", "0"], "--lr must be a finite number in (0, inf)"),
     (["--discount", "2"], "--discount must be a finite number in (0, 1]"),

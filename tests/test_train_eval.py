@@ -44,6 +44,25 @@ def test_saved_config_round_trips(trained):
     assert saved.seed == 3 and saved.hidden == [256, 256] and saved.discount == 0.99
 
 
+def test_init_from_fine_tunes_from_another_runs_params(trained, tmp_path, cache_env):
+    source, _ = trained
+    with pytest.raises(config.ConfigError, match="hidden \\[256, 256\\] there, \\[32, 32\\] here"):
+        config.validate(config.TrainConfig(init_from=str(source), hidden=[32, 32], run_dir=str(tmp_path / "bad")))
+    run_dir = tmp_path / "tuned"
+    proc = run("train.py", *TINY, *NOISE, "--num_timesteps", "64", "--seed", "4", "--run_dir", str(run_dir),
+               "--init_from", str(source), env=cache_env)
+    assert f"starting from the params of {source} (its step 64)" in proc.stdout
+    cfg = config.load_config(run_dir)
+    env = config.make_env_for(cfg)
+    template = training.init_params(cfg, env)
+    _, before, _ = checkpoints.load_latest(source, template)
+    _, after, _ = checkpoints.load_latest(run_dir, template)
+    # The observation normalizer's sample count (brax's UInt64: hi and lo words) carries on from the
+    # source's: a fresh start would count only this run's own samples, as many as the source's.
+    count_before, count_after = ((int(p[0].count.hi) << 32) + int(p[0].count.lo) for p in (before, after))
+    assert count_after == 2 * count_before > 0
+
+
 # Resuming after crashes at chosen moments (before the first checkpoint among them): tests/test_crashes.py.
 
 
