@@ -32,19 +32,16 @@ def opposite_pairs(env) -> list[tuple[int, int]]:
     return [(i + 1, j + 1) for i in range(legs) for j in range(i + 1, legs) if unit[i] @ unit[j] < -0.99]
 
 
-def sweep(policy_path: str, episodes: int, seed: int = 0, **overrides) -> list[dict]:
+def sweep(policy_path: str, episodes: int, seed: int = 0, workers: int = 1, **overrides) -> list[dict]:
     """Summaries (hexa_mjx.player.summarize) of each condition, with its failed legs and speed ratio."""
-    from hexa_mjx.sweeps import CLEAN
+    from hexa_mjx.sweeps import CLEAN, run_conditions
 
     overrides = {**CLEAN, **overrides}  # only the failed legs change, whatever the policy was trained with
-    policy = player.OnnxPolicy(policy_path)
-    env = player.env_for(policy, **overrides)
+    env = player.env_for(player.OnnxPolicy(policy_path), **overrides)
     conditions = [()] + [(leg,) for leg in range(1, len(env.robot.legs) + 1)] + opposite_pairs(env)
-    rows = []
-    for legs in conditions:
-        env = player.env_for(policy, **{**overrides, "disabled_legs": legs, "leg_failure": "none"})
-        summary = player.summarize([player.run_episode(policy, env, seed + i) for i in range(episodes)])
-        rows.append({"failed_legs": list(legs), **summary})
+    summaries = run_conditions(policy_path, [({**overrides, "disabled_legs": legs}, None) for legs in conditions],
+                               episodes, seed, workers)
+    rows = [{"failed_legs": list(legs), **summary} for legs, summary in zip(conditions, summaries)]
     intact = rows[0]["speed_to_first_goal"]
     for row in rows:
         speed = row["speed_to_first_goal"]
@@ -69,12 +66,13 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--start_joint_noise", type=float, default=None, help="rad (default: the policy's training)")
     p.add_argument("--failure_mode", default="limp", choices=["limp", "locked"])
+    p.add_argument("--workers", type=int, default=1, help="processes that share the episodes")
     p.add_argument("--out", default="", help="write the rows as JSON here")
     args = p.parse_args(argv)
-    if args.episodes < 1:
-        p.error("--episodes must be at least 1")
+    if args.episodes < 1 or args.workers < 1:
+        p.error("--episodes and --workers must be at least 1")
     try:
-        rows = sweep(args.policy, args.episodes, args.seed, start_joint_noise=args.start_joint_noise,
+        rows = sweep(args.policy, args.episodes, args.seed, args.workers, start_joint_noise=args.start_joint_noise,
                      failure_mode=args.failure_mode)
     except (FileNotFoundError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)

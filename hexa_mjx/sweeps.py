@@ -85,28 +85,35 @@ def _episodes(policy_path: str, overrides: dict, ranges, seeds: list[int]) -> li
     return [player.run_episode(policy, env, s) for s in seeds]
 
 
-def evaluate_points(policy_path: str, points: list[dict], episodes: int, seed: int = 0, workers: int = 1,
-                    **overrides) -> list[dict]:
-    """A summary (hexa_mjx.player.summarize) per point {sweep name: value}, each over the same
-    seeded episodes, run in `workers` processes."""
-    jobs, chunk = [], max(1, -(-episodes // max(workers, 1)))
-    for point in points:
-        setting, ranges = settings(point)
-        player.env_for(player.OnnxPolicy(policy_path), **{**CLEAN, **overrides, **setting})  # bad input fails here
-        for start in range(0, episodes, chunk):
-            jobs.append((point, {**CLEAN, **overrides, **setting}, ranges,
-                         list(range(seed + start, seed + min(episodes, start + chunk)))))
+def run_conditions(policy_path: str, conditions: list[tuple[dict, object]], episodes: int, seed: int = 0,
+                   workers: int = 1) -> list[dict]:
+    """A summary (hexa_mjx.player.summarize) per condition (EnvConfig overrides, fixed physics
+    ranges or None), each over the same seeded episodes, run in `workers` processes."""
+    policy = player.OnnxPolicy(policy_path)
+    for overrides, _ in conditions:
+        player.env_for(policy, **overrides)  # bad input fails here, before any episode runs
+    chunk = max(1, -(-episodes // max(workers, 1)))
+    jobs = [(i, overrides, ranges, list(range(seed + start, seed + min(episodes, start + chunk))))
+            for i, (overrides, ranges) in enumerate(conditions) for start in range(0, episodes, chunk)]
     if workers > 1:
         # spawn, not fork: the caller may hold JAX's or onnxruntime's threads, which a fork copies mid-flight
         with concurrent.futures.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
             results = list(pool.map(_episodes, *zip(*[(policy_path, o, r, s) for _, o, r, s in jobs])))
     else:
         results = [_episodes(policy_path, o, r, s) for _, o, r, s in jobs]
-    rows = []
+    return [player.summarize([e for (j, *_), result in zip(jobs, results) if j == i for e in result])
+            for i in range(len(conditions))]
+
+
+def evaluate_points(policy_path: str, points: list[dict], episodes: int, seed: int = 0, workers: int = 1,
+                    **overrides) -> list[dict]:
+    """A summary per point {sweep name: value}, with the point's values (run_conditions)."""
+    conditions = []
     for point in points:
-        done = [e for (p, *_), result in zip(jobs, results) if p is point for e in result]
-        rows.append({**point, **player.summarize(done)})
-    return rows
+        setting, ranges = settings(point)
+        conditions.append(({**CLEAN, **overrides, **setting}, ranges))
+    summaries = run_conditions(policy_path, conditions, episodes, seed, workers)
+    return [{**point, **summary} for point, summary in zip(points, summaries)]
 
 
 def sweep(policy_path: str, name: str, values: list[float], episodes: int, seed: int = 0, workers: int = 1,
