@@ -40,10 +40,12 @@ from hexa_mjx.observations import noise_scale  # noqa: E402
 __all__ = ["EnvConfig", "HexapodEnv", "floor_contacts"]
 
 
-def floor_contacts(data: mjx.Data):
-    """(geom1, geom2, dist) of MJX's contact arrays (JAX implementation only)."""
+def floor_contacts(data: mjx.Data, normals: bool = False):
+    """(geom1, geom2, dist) of MJX's contact arrays (JAX implementation only), and with `normals`
+    the contacts' world-frame normals (n, 3) as well."""
     contact = data._impl.contact
-    return contact.geom1, contact.geom2, contact.dist
+    found = contact.geom1, contact.geom2, contact.dist
+    return (*found, contact.frame[..., 0, :]) if normals else found
 
 
 class HexapodEnv(Env):

@@ -152,3 +152,24 @@ def test_heightfield_collides_with_feet_and_torso_spheres_only(robot_on):
     mujoco.mj_forward(model, data)
     touching = {names[g] for c in data.contact[: data.ncon] for g in (c.geom1, c.geom2) if g != floor and c.dist < 0}
     assert touching and all(n.startswith("torso_terrain_") for n in touching)
+
+
+def test_native_heightfield_gives_a_sphere_near_a_cell_edge_a_side_contact():
+    """The mechanism behind native MuJoCo's falls on a flat heightfield (docs/RESULTS.md): a foot
+    sphere 5 mm deep and 8 mm from a cell's edge also touches the neighbouring prism's side."""
+    import mujoco
+
+    from hexa_mjx.contact_check import main, native_tilts
+
+    radius, depth = 0.012, 0.005  # m: the robot's foot sphere, a typical penetration
+    m = mujoco.MjModel.from_xml_string(f"""<mujoco><asset><hfield name="h" nrow="3" ncol="3" size="0.1 0.1 0.05 0.1"/>
+        </asset><worldbody><geom type="hfield" hfield="h"/>
+        <body><freejoint/><geom type="sphere" size="{radius}"/></body></worldbody></mujoco>""")
+
+    def tilts(x, y):
+        return native_tilts(m, np.array([[x, y, radius - depth, 1, 0, 0, 0]]))
+
+    assert list(tilts(-0.05, -0.085)) == [0.0]  # 15 mm or more from every edge and diagonal: one upright contact
+    seam = tilts(-0.008, -0.05)  # the cells' edge is at x = 0
+    assert len(seam) == 2 and min(seam) == 0.0 and max(seam) > 45
+    assert main(["no-such-policy.onnx"]) == 2 and main(["policies/navigate.onnx", "--terrain", "lava"]) == 2
