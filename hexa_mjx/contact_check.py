@@ -18,6 +18,7 @@ import mujoco
 import numpy as np
 
 from hexa_mjx import player
+from hexa_mjx.sweeps import CLEAN
 
 
 def tilt_degrees(normal_z) -> np.ndarray:
@@ -87,8 +88,7 @@ def main(argv=None) -> int:
     try:
         policy = player.OnnxPolicy(args.policy)
         env = player.env_for(policy, terrain=args.terrain, terrain_difficulty=args.terrain_difficulty,
-                             terrain_seed=args.terrain_seed, push_speed=0.0, obs_noise=0.0, action_latency=0.0,
-                             leg_failure="none")
+                             terrain_seed=args.terrain_seed, **CLEAN)
     except (FileNotFoundError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
