@@ -108,13 +108,7 @@ class Logger:
             if key != "step" and isinstance(value, float) and math.isfinite(value):
                 self.tb.add_scalar(key.replace("eval/episode_", ""), value, step)
         self.tb.flush()
-        now = time.time()
-        with self.lock:
-            if self.phase == "evaluation":
-                print(f"evaluation compiled and run in {now - self.phase_t0:.0f} s; compiling the training "
-                      "programs ...", flush=True)
-                self.phase, self.phase_t0 = "training", now
-            self.last_line_t, self.last_line_step = now, step
+        self.evaluated(step)
         left = max(self.cfg.num_timesteps - step, 0) / rate if math.isfinite(rate) and rate > 0 else math.nan
         task_figure = (f"goals {row['goals_per_episode']:.2f}" if self.cfg.task == "navigate"
                        else f"goal bonus {row['goal_bonus']:7.1f}")
@@ -125,6 +119,17 @@ class Logger:
               + (f"  curriculum level {row['curriculum/level_mean']:.1f} (top {row['curriculum/top_level_share']:.0%})"
                  if "curriculum/level_mean" in row else ""), flush=True)
         self.last = row
+
+    def evaluated(self, step: int) -> None:
+        """An evaluation has run (logged or not: a resumed run's step-0 row is already there); the
+        first one says that the evaluation program is ready and the training one is compiling."""
+        now = time.time()
+        with self.lock:
+            if self.phase == "evaluation":
+                print(f"evaluation compiled and run in {now - self.phase_t0:.0f} s; compiling the training "
+                      "programs ...", flush=True)
+                self.phase, self.phase_t0 = "training", now
+            self.last_line_t, self.last_line_step = now, step
 
     def close(self):
         self.tb.close()

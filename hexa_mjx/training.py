@@ -180,6 +180,8 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
         fresh_row = step > 0 or start_step not in logged  # brax evaluates restored params at its step 0
         if fresh_row:
             logger(start_step + step, {**metrics, **(levels.summary() if levels else {})})
+        else:
+            logger.evaluated(start_step + step)
         if step == 0:
             faults.point("training-started")
         elif step in pending:
