@@ -15,6 +15,7 @@ from typing import Any
 import jax
 
 from hexa_mjx import distributed, rewards, terrain
+from hexa_mjx.checkpoints import list_checkpoints, resolve_checkpoint
 from hexa_mjx.jax_setup import devices_for
 from hexa_mjx.tasks import TASKS, make_env, task_class
 
@@ -259,7 +260,7 @@ def validate(cfg: TrainConfig, writes: bool = True) -> TrainConfig:
         raise ConfigError(f"--model {cfg.model} is not a file; convert a URDF with "
                           f"`python -m hexa_mjx.convert URDF -o {cfg.model}`")
     make_env_for(cfg, curriculum_levels=cfg.curriculum_levels)  # a bad ctrl_hz, task or reward raises here
-    if cfg.init_from:
+    if cfg.init_from and not (cfg.resume and list_checkpoints(run_dir)):  # a resume needs only its own
         init_checkpoint(cfg)
     if writes:
         check_run_dir(cfg, run_dir)
@@ -272,8 +273,6 @@ PARAM_SHAPE = ("task", "model", "hidden", "policy_dist")
 
 def init_checkpoint(cfg: TrainConfig) -> Path:
     """The checkpoint folder --init_from names; ConfigError if there is none or its networks differ."""
-    from hexa_mjx.checkpoints import resolve_checkpoint
-
     try:
         source_dir, checkpoint = resolve_checkpoint(Path(cfg.init_from))
     except FileNotFoundError as e:

@@ -4,6 +4,7 @@ import dataclasses
 import json
 import os
 import re
+import shutil
 import subprocess
 from types import SimpleNamespace
 
@@ -45,7 +46,8 @@ def test_saved_config_round_trips(trained):
 
 
 def test_init_from_fine_tunes_from_another_runs_params(trained, tmp_path, cache_env):
-    source, _ = trained
+    source = tmp_path / "source"  # a copy, deleted below
+    shutil.copytree(trained[0], source)
     with pytest.raises(config.ConfigError, match="hidden \\[256, 256\\] there, \\[32, 32\\] here"):
         config.validate(config.TrainConfig(init_from=str(source), hidden=[32, 32], run_dir=str(tmp_path / "bad")))
     run_dir = tmp_path / "tuned"
@@ -61,6 +63,9 @@ def test_init_from_fine_tunes_from_another_runs_params(trained, tmp_path, cache_
     # source's: a fresh start would count only this run's own samples, as many as the source's.
     count_before, count_after = ((int(p[0].count.hi) << 32) + int(p[0].count.lo) for p in (before, after))
     assert count_after == 2 * count_before > 0
+    # Resuming it needs only its own checkpoints, not the source's.
+    shutil.rmtree(source)
+    config.validate(dataclasses.replace(cfg, resume=True))
 
 
 # Resuming after crashes at chosen moments (before the first checkpoint among them): tests/test_crashes.py.
