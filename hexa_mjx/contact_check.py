@@ -26,18 +26,10 @@ def tilt_degrees(normal_z) -> np.ndarray:
     return np.degrees(np.arccos(np.minimum(1.0, np.abs(np.asarray(normal_z, np.float64)))))
 
 
-def walk_states(policy, env, episodes: int, steps: int, every: int) -> np.ndarray:
-    """qpos of every `every`-th control step of `episodes` seeded episodes of up to `steps` steps."""
-    states = []
-    for seed in range(episodes):
-        obs = env.reset(seed=seed)
-        for t in range(steps):
-            obs, _, terminated, _, _ = env.step(policy(obs))
-            if t % every == 0:
-                states.append(env.data.qpos.copy())
-            if terminated:
-                break
-    return np.array(states)
+def walk_states(policy, env, episodes: int, every: int) -> np.ndarray:
+    """qpos after every `every`-th control step (the first included) of `episodes` seeded episodes."""
+    return np.concatenate([player.run_episode(policy, env, seed, record=True)["trajectory"]["qpos"][1::every]
+                           for seed in range(episodes)])
 
 
 def native_tilts(model: mujoco.MjModel, states: np.ndarray) -> np.ndarray:
@@ -88,11 +80,11 @@ def main(argv=None) -> int:
     try:
         policy = player.OnnxPolicy(args.policy)
         env = player.env_for(policy, terrain=args.terrain, terrain_difficulty=args.terrain_difficulty,
-                             terrain_seed=args.terrain_seed, **CLEAN)
+                             terrain_seed=args.terrain_seed, episode_length=args.steps, **CLEAN)
     except (FileNotFoundError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    states = walk_states(policy, env, args.episodes, args.steps, args.every)
+    states = walk_states(policy, env, args.episodes, args.every)
     print(f"{len(states)} states of {args.policy} walking on {args.terrain} at difficulty {args.terrain_difficulty:g}")
     print("native MuJoCo:", summary(native_tilts(env.mj_model, states), len(states)))
     print("MJX:          ", summary(mjx_tilts(env.mj_model, states), len(states)))
