@@ -92,6 +92,9 @@ class TrainConfig:
                 "not told which", "choices": ["none", "random"]})
     leg_failure_rate: float = dataclasses.field(default=0.5, metadata={
         "help": "probability that an episode has a failed leg (--leg_failure random)"})
+    leg_failure_weights: list = dataclasses.field(default_factory=list, metadata={
+        "help": "relative chance of each leg (1, 2, ...) being the failed one (--leg_failure random), e.g. "
+                "1 1 3 3 1 1 to train more on legs 3 and 4 (default: uniform)", "nargs": "+", "type": float})
     failure_mode: str = dataclasses.field(default="limp", metadata={
         "help": "a failed leg's servos give no torque (limp) or hold the start angles (locked)",
         "choices": ["limp", "locked"]})
@@ -254,6 +257,8 @@ def validate(cfg: TrainConfig, writes: bool = True) -> TrainConfig:
     for name in ("num_timesteps", "num_evals", "unroll_length", "update_epochs", "episode_length", "num_eval_envs"):
         if getattr(cfg, name) < 1:
             raise ConfigError(f"--{name} must be at least 1, got {getattr(cfg, name)}")
+    if cfg.leg_failure_weights and cfg.leg_failure != "random":
+        raise ConfigError("--leg_failure_weights weigh the legs of --leg_failure random; add it or drop the weights")
     run_dir = Path(cfg.run_dir) if cfg.run_dir else default_run_dir(cfg)
     cfg = dataclasses.replace(cfg, run_dir=str(run_dir))
     if cfg.model and not Path(cfg.model).is_file():
@@ -345,7 +350,8 @@ def make_env_for(cfg: TrainConfig, task: str = "", **overrides):
                     start_joint_noise=cfg.start_joint_noise, start_yaw_noise=cfg.start_yaw_noise,
                     max_contact_points=cfg.max_contact_points, goal_min_distance=cfg.goal_min_distance,
                     goal_max_distance=cfg.goal_max_distance, goal_distance_cap=cfg.goal_max_distance,
-                    leg_failure=cfg.leg_failure, leg_failure_rate=cfg.leg_failure_rate, failure_mode=cfg.failure_mode,
+                    leg_failure=cfg.leg_failure, leg_failure_rate=cfg.leg_failure_rate,
+                    leg_failure_weights=tuple(cfg.leg_failure_weights), failure_mode=cfg.failure_mode,
                     push_speed=cfg.push_speed, push_interval=cfg.push_interval,
                     action_latency=cfg.action_latency, obs_noise=cfg.obs_noise, terrain=cfg.terrain,
                     terrain_difficulty=cfg.terrain_difficulty)

@@ -214,14 +214,18 @@ class HexapodEnv(Env):
 
     def draw_failure(self, rng: jax.Array) -> jax.Array:
         """An episode's failed legs, (legs,) of 0/1: the fixed `disabled_legs`, or one leg drawn
-        uniformly with probability `leg_failure_rate`. Drawn at reset and on an episode's last step
+        (uniformly, or by `leg_failure_weights`) with probability `leg_failure_rate`. Drawn at reset and on an episode's last step
         (so brax's auto-reset, which keeps `info`, starts the next episode with a new draw)."""
         legs = len(self.robot.legs)
         if self.config.leg_failure != "random":
             return jp.zeros(legs).at[jp.asarray(self.config.disabled_legs, jp.int32) - 1].set(1.0)
         k_which, k_whether = jax.random.split(rng)
         fails = jax.random.uniform(k_whether) < self.config.leg_failure_rate
-        return jax.nn.one_hot(jax.random.randint(k_which, (), 0, legs), legs) * fails
+        if self.config.leg_failure_weights:
+            leg = jax.random.choice(k_which, legs, p=jp.asarray(self.config.leg_failure_weights, jp.float32))
+        else:
+            leg = jax.random.randint(k_which, (), 0, legs)
+        return jax.nn.one_hot(leg, legs) * fails
 
     def restart(self, data: mjx.Data, rng: jax.Array, level=0) -> mjx.Data:
         """`data` with a fresh start state (qpos, qvel, ctrl, time) and first goal drawn with `rng`

@@ -59,10 +59,12 @@ class EnvConfig:
     # Leg failure: a failed leg's three servos stop working. "limp": no torque; "locked": held at the
     # start pose's angles. `disabled_legs` fails these legs (1-based) in every episode; with
     # `leg_failure="random"`, each episode fails one leg drawn uniformly, with probability
-    # `leg_failure_rate`. The policy is not told which leg failed.
+    # `leg_failure_rate`; `leg_failure_weights` (one per leg) make some legs likelier to be the
+    # failed one. The policy is not told which leg failed.
     disabled_legs: tuple = ()
     leg_failure: str = "none"  # "none" | "random"
     leg_failure_rate: float = 0.5  # probability that an episode has a failed leg (random)
+    leg_failure_weights: tuple = ()  # relative chance of each leg, legs 1, 2, ... ((): uniform)
     failure_mode: str = "limp"  # "limp" | "locked"
     # Pushes: every `push_interval` s the torso's planar velocity gets a kick in a random direction
     # of a speed uniform in [0, push_speed] m/s (0: no pushes).
@@ -142,6 +144,9 @@ def check_config(config: EnvConfig) -> None:
         raise ValueError(f"failure_mode is 'limp' or 'locked', got {config.failure_mode!r}")
     if not 0 <= config.leg_failure_rate <= 1:
         raise ValueError(f"leg_failure_rate is a probability in [0, 1], got {config.leg_failure_rate}")
+    weights = config.leg_failure_weights
+    if weights and not (all(math.isfinite(w) and w >= 0 for w in weights) and sum(weights) > 0):
+        raise ValueError(f"leg_failure_weights are relative chances, each 0 or more and not all 0, got {list(weights)}")
     if config.disabled_legs and config.leg_failure != "none":
         raise ValueError("disabled_legs and leg_failure='random' exclude each other: choose fixed or random failures")
     for leg in config.disabled_legs:

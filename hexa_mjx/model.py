@@ -87,6 +87,9 @@ class RobotModel:
         for leg in config.disabled_legs:
             if leg > len(self.legs):
                 raise ValueError(f"disabled_legs: leg {leg} does not exist; this robot has legs 1 to {len(self.legs)}")
+        if config.leg_failure_weights and len(config.leg_failure_weights) != len(self.legs):
+            raise ValueError(f"leg_failure_weights needs one weight per leg ({len(self.legs)}), "
+                             f"got {len(config.leg_failure_weights)}")
         if len(config.disabled_legs) == len(self.legs):
             raise ValueError(f"disabled_legs disables all {len(self.legs)} legs; leave at least one working")
         self.geom_is_foot = np.isin(np.arange(model.ngeom), self.feet)

@@ -184,7 +184,8 @@ class NativeEnv:
         """This episode's failed legs (0/1 per leg), as HexapodEnv.draw_failure draws them."""
         mask = np.zeros(len(self.robot.legs))
         if self.config.leg_failure == "random":
-            leg = self.rng.integers(len(mask))
+            weights = np.asarray(self.config.leg_failure_weights, float)
+            leg = self.rng.choice(len(mask), p=weights / weights.sum()) if weights.size else self.rng.integers(len(mask))
             mask[leg] = float(self.rng.uniform() < self.config.leg_failure_rate)
         else:
             mask[np.asarray(self.config.disabled_legs, int) - 1] = 1.0

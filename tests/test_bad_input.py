@@ -64,6 +64,8 @@ TRAIN_CASES = [
     (["--task", "navigate", "--curriculum_levels", "-1"], "curriculum_levels is a whole number of levels"),
     (["--start_yaw_noise", "-1"], "start_yaw_noise is a range in radians from 0 to pi"),
     (["--leg_failure_rate", "2"], "leg_failure_rate is a probability in [0, 1]"),
+    (["--leg_failure_weights", "1", "1", "3", "3", "1", "1"], "weigh the legs of --leg_failure random"),
+    (["--leg_failure", "random", "--leg_failure_weights", "1", "3"], "one weight per leg (6)"),
     (["--push_speed", "-1"], "push_speed is a speed in m/s"),
     (["--push_interval", "0"], "push_interval must be a time above 0 s"),
     (["--action_latency", "5"], "action_latency is in control steps from 0 to 1"),

@@ -334,7 +334,25 @@ def test_random_leg_failure_is_drawn_per_episode():
     assert abs(failed.sum(1).mean() - 0.5) < 0.05 and failed.sum(0).min() > 100  # every leg fails sometimes
 
 
+def test_leg_failure_weights_pick_the_failed_leg_in_both_engines():
+    from hexa_mjx.native import NativeEnv
+    weights = (0, 0, 3, 1, 0, 0)  # legs 3 and 4 only, 3 three times as often
+    env = hexa_mjx.make_env(leg_failure="random", leg_failure_rate=1.0, leg_failure_weights=weights)
+    mjx_counts = np.asarray(jax.jit(jax.vmap(env.draw_failure))(jax.random.split(jax.random.PRNGKey(0), 2000))).sum(0)
+    native = NativeEnv(env.config)
+    native_counts = np.zeros(6)
+    for seed in range(400):
+        native.reset(seed=seed)
+        native_counts += native.failed_legs
+    for counts in (mjx_counts, native_counts):
+        assert counts[[0, 1, 4, 5]].sum() == 0 and counts.sum() > 0
+        assert 2.4 < counts[2] / counts[3] < 3.8, counts
+
+
 @pytest.mark.parametrize("settings,message", [
+    (dict(leg_failure="random", leg_failure_weights=(1, 1)), "one weight per leg"),
+    (dict(leg_failure="random", leg_failure_weights=(0,) * 6), "not all 0"),
+    (dict(leg_failure="random", leg_failure_weights=(1, 1, -1, 1, 1, 1)), "each 0 or more"),
     (dict(disabled_legs=(7,)), "leg 7 does not exist"),
     (dict(disabled_legs=(1, 2, 3, 4, 5, 6)), "disables all 6 legs"),
     (dict(disabled_legs=(0,)), "leg numbers from 1"),
