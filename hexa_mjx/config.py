@@ -119,6 +119,13 @@ class TrainConfig:
         "help": "episodes per evaluation (deterministic policy)"})
     compile_cache: bool = dataclasses.field(default=True, metadata={
         "help": "keep compiled programs in a per-user cache folder (--no_compile_cache: off)"})
+    record_optimizer: bool = dataclasses.field(default=True, metadata={
+        "help": "save Adam's state in each checkpoint, so a resume continues it (--no_record_optimizer: Adam "
+                "starts afresh on resume, and with --no_progress the compile cache can keep the training program: "
+                "JAX caches no program that calls back to the host)"})
+    eval_at_start: bool = dataclasses.field(default=True, metadata={
+        "help": "evaluate the untrained params before the first update, as brax does (--no_eval_at_start: skip "
+                "it; it runs about 30 s on a 2-core CPU)"})
     progress: bool = dataclasses.field(default=True, metadata={
         "help": "a console line every 15 s between evaluations and one when training has compiled "
                 "(--no_progress: off; it costs about 1%% of training speed, docs/RESULTS.md)"})
@@ -148,12 +155,13 @@ PRESETS: dict[str, dict[str, Any]] = {
     # Chosen for wall time to a walking policy on a 2-core CPU (docs/RESULTS.md, "Time to success"):
     # 4 epochs per update (Playground's number) and [128, 128] networks cut the learner's matmuls
     # about 8x, the environment is then most of the time, and the policy still learns in as few steps.
-    "fast": {"update_epochs": 4, "hidden": [128, 128]},
+    # No evaluation of the untrained params: it costs about 30 s and says nothing.
+    "fast": {"update_epochs": 4, "hidden": [128, 128], "eval_at_start": False},
 }
 
 # Settings that may change on --resume without making it a different run.
 RESUMABLE = {"num_timesteps", "num_evals", "resume", "run_dir", "cpu_devices", "compile_cache", "progress",
-             "coordinator", "num_processes", "process_id", "coordinator_timeout"}
+             "eval_at_start", "record_optimizer", "coordinator", "num_processes", "process_id", "coordinator_timeout"}
 # Settings that may differ between the processes of one multi-process run.
 PER_PROCESS = {"process_id", "compile_cache", "progress"}
 

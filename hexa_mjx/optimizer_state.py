@@ -27,9 +27,11 @@ class AdamRecorder:
     """Wraps brax's Adam: restores `restored` (host arrays, `adam_template`'s structure) at init and
     keeps the state after the most recent PPO update for `latest`."""
 
-    def __init__(self, updates_per_batch: int, restored=None):
+    def __init__(self, updates_per_batch: int, restored=None, record: bool = True):
         self.updates_per_batch = updates_per_batch  # optimizer steps in one PPO update
         self.restored = restored
+        # The record is a host callback, and JAX's compile cache keeps no program that has one.
+        self.record = record
         self._latest = None
         self.used = False
 
@@ -40,7 +42,8 @@ class AdamRecorder:
 
     @property
     def latest(self):
-        """The Adam state after the last PPO update so far, as NumPy arrays (None before the first)."""
+        """The Adam state after the last PPO update so far, as NumPy arrays (None before the first,
+        or when not recording)."""
         jax.effects_barrier()
         return None if self._latest is None else jax.tree.map(np.array, self._latest)
 
@@ -56,6 +59,8 @@ class AdamRecorder:
             inner, calls = state
             updates, inner = adam.update(updates, inner, params)
             calls = calls + 1
+            if not self.record:
+                return updates, (inner, calls)
             # Every device of every process calls back with the same (all-reduced) state.
             jax.lax.cond(calls % self.updates_per_batch == 0, lambda s: jax.debug.callback(self._record, s),
                          lambda s: None, inner)

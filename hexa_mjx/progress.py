@@ -67,13 +67,22 @@ class Logger:
         self.phase, self.phase_t0 = "", self.t0
         self.last_line_t, self.last_line_step = self.t0, start_step
         self.first_update_s = None
+        self.evaluation_t0, self.evaluation_ran = None, False  # when the first evaluation started; whether it ran
         self.lock = threading.Lock()  # each device's tap calls progress() from its own thread
 
-    def compiling(self) -> None:
-        """Say that the evaluation and training programs are being compiled (or loaded from cache)."""
-        self.phase, self.phase_t0 = "evaluation", time.time()
-        print("compiling the environment and evaluation programs (1-3 min on a 2-core CPU the first time; "
+    def compiling(self, evaluation_first: bool = True) -> None:
+        """Say that the programs are being compiled (or loaded from cache): the evaluation's first
+        when the run evaluates before training, else the training's."""
+        self.phase = "evaluation" if evaluation_first else "training"
+        self.phase_t0 = time.time()
+        print(f"compiling the environment and {self.phase} programs (1-3 min on a 2-core CPU the first time; "
               "seconds when the compile cache has them) ...", flush=True)
+
+    def evaluating(self) -> None:
+        """An evaluation starts: the first one compiles its program."""
+        with self.lock:
+            if self.evaluation_t0 is None and not self.evaluation_ran:
+                self.evaluation_t0 = self.phase_t0 if self.phase == "evaluation" else time.time()
 
     def progress(self, step: int, episode_return: float) -> None:
         """A report from the training environments (`wrappers.ProgressTap`, once per rollout): the
@@ -121,14 +130,17 @@ class Logger:
         self.last = row
 
     def evaluated(self, step: int) -> None:
-        """An evaluation has run (logged or not: a resumed run's step-0 row is already there); the
-        first one says that the evaluation program is ready and the training one is compiling."""
+        """An evaluation has run and its row is written; the first one says that the evaluation
+        program is ready (and, before training, that the training one is compiling)."""
         now = time.time()
         with self.lock:
-            if self.phase == "evaluation":
-                print(f"evaluation compiled and run in {now - self.phase_t0:.0f} s; compiling the training "
-                      "programs ...", flush=True)
-                self.phase, self.phase_t0 = "training", now
+            if self.evaluation_t0 is not None:
+                before_training = self.phase == "evaluation"
+                print(f"evaluation compiled and run in {now - self.evaluation_t0:.0f} s"
+                      + ("; compiling the training programs ..." if before_training else ""), flush=True)
+                self.evaluation_t0, self.evaluation_ran = None, True
+                if before_training:
+                    self.phase, self.phase_t0 = "training", now
             self.last_line_t, self.last_line_step = now, step
 
     def close(self):

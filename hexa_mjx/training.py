@@ -26,6 +26,7 @@ from hexa_mjx.curriculum import LevelHistogram
 from hexa_mjx.jax_setup import devices_for, prepare_jax
 from hexa_mjx.optimizer_state import AdamRecorder, adam_template, recording
 from hexa_mjx.progress import Logger, keep_rows_up_to
+from hexa_mjx.run_evaluator import RunEvaluator
 
 
 def network_factory(cfg: TrainConfig):
@@ -157,7 +158,8 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
     if adam:
         optimizer = distributed.share(optimizer if main else optimizer_template)
     # brax's Adam, recorded for each checkpoint and restored from the last (hexa_mjx.optimizer_state).
-    recorder = AdamRecorder(cfg.update_epochs * cfg.num_minibatches, restored=optimizer)
+    recorder = AdamRecorder(cfg.update_epochs * cfg.num_minibatches, restored=optimizer,
+                            record=cfg.record_optimizer)
     remaining = cfg.num_timesteps - start_step
     if remaining <= 0:
         print(f"{run_dir} already has {start_step:,} of {cfg.num_timesteps:,} steps; nothing to do")
@@ -168,6 +170,13 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
     levels = LevelHistogram(cfg.curriculum_levels, devices_for(cfg)) if cfg.curriculum_levels else None
 
     pending = {}  # the checkpoint brax handed over, saved once its evaluation row is written
+    evaluations = {}  # each step's evaluation metrics, run in on_params and logged in on_progress
+    # A fresh run evaluates its untrained params if asked; a resumed one its checkpoint's only if
+    # that row is missing (a crash between the two, or a run from before rows were written first).
+    evaluate_start = start_step not in logged and (cfg.eval_at_start or start_step > 0)
+    randomization_fn = randomization.randomization_fn(env) if cfg.randomize else None
+    evaluator = RunEvaluator(eval_env, wrap_env_fn(env, cfg.randomize), randomization_fn, cfg.num_eval_envs,
+                             cfg.episode_length, seed=cfg.seed + start_step) if main else None
 
     def on_tap(clock, return_sum, episodes):  # hexa_mjx.wrappers.ProgressTap, from each device
         if logger is not None:
@@ -177,11 +186,7 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
     def on_progress(step, metrics):
         if logger is None:  # brax reports on process 0 only; kept safe for other callers
             return
-        fresh_row = step > 0 or start_step not in logged  # brax evaluates restored params at its step 0
-        if fresh_row:
-            logger(start_step + step, {**metrics, **(levels.summary() if levels else {})})
-        else:
-            logger.evaluated(start_step + step)
+        logger(start_step + step, {**metrics, **evaluations.pop(step), **(levels.summary() if levels else {})})
         if step == 0:
             faults.point("training-started")
         elif step in pending:
@@ -189,12 +194,18 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
             # the rows past its checkpoint and trains those steps again.
             faults.point("row-written")
             save_checkpoint(run_dir, start_step + step, *pending.pop(step))
-        if fresh_row and on_eval:  # a sweep's scheduler may stop the run here: its checkpoint is saved
+        if on_eval:  # a sweep's scheduler may stop the run here: its checkpoint is saved
             on_eval(logger.last)
 
-    def on_params(step, make_policy, params):
-        if step > 0 and main:
+    def on_params(step, make_policy, params):  # brax: before each on_progress, and once before training
+        if not main or (step == 0 and not evaluate_start):
+            return
+        if step > 0:
             pending[step] = (params, recorder.latest)
+        logger.evaluating()
+        evaluations[step] = evaluator(make_policy, params)
+        if step == 0:  # brax calls on_progress after training epochs only
+            on_progress(0, {})
 
     t0 = time.time()
     devices = devices_for(cfg)
@@ -203,15 +214,14 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
           f"{cfg.num_envs} envs ({devices} {jax.default_backend()} device{'s' * (devices > 1)}{processes}), "
           f"{cfg.steps_per_update:,} steps per update -> {run_dir}", flush=True)
     if logger:
-        logger.compiling()
-    randomization_fn = randomization.randomization_fn(env) if cfg.randomize else None
+        logger.compiling(evaluation_first=evaluate_start)
     with recording(recorder):
         ppo.train(environment=env, eval_env=eval_env, num_timesteps=remaining, **ppo_settings(cfg),
                   seed=cfg.seed + start_step, max_devices_per_host=devices,
                   wrap_env_fn=wrap_env_fn(env, cfg.randomize, levels, on_tap if cfg.progress else None,
                                           progress_every=cfg.steps_per_update // cfg.num_envs),
                   randomization_fn=randomization_fn,
-                  num_evals=evals_for(cfg, remaining), num_eval_envs=cfg.num_eval_envs, deterministic_eval=True,
+                  num_evals=evals_for(cfg, remaining), num_eval_envs=cfg.num_eval_envs, run_evals=False,
                   progress_fn=on_progress, policy_params_fn=on_params, restore_params=restore)
     total = time.time() - t0
     if logger is None:

@@ -69,8 +69,8 @@ def run(script, *args, env=None, check=True):
 
 @pytest.fixture(scope="session")
 def trained(tmp_path_factory, cache_env):
-    """train.py's tiny run (64 steps, seed 3): (run dir, its process)."""
+    """train.py's tiny run (64 steps, seed 3): (run dir, its process, whose stderr logs each compile)."""
     run_dir = tmp_path_factory.mktemp("runs") / "tiny"
     proc = run("train.py", *TINY, *NOISE, "--num_timesteps", "64", "--seed", "3", "--run_dir", str(run_dir),
-               env=cache_env)
+               env={**cache_env, "JAX_LOG_COMPILES": "1"})
     return run_dir, proc

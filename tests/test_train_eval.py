@@ -32,6 +32,8 @@ def test_train_writes_run_directory(trained):
     # Compiling is announced, and its end (the first training update) reported.
     assert "compiling the environment and evaluation programs" in proc.stdout
     assert re.search(r"training compiled and its first rollout ran in \d+ s", proc.stdout)
+    # The untrained params (step 0) and the trained ones (64) are evaluated by one program.
+    assert proc.stderr.count("Compiling jit(generate_eval_unroll)") == 1, proc.stderr[-3000:]
     # One CPU device per core, as many as divide the 8 envs and the batch of 8.
     devices = max(d for d in range(1, len(os.sched_getaffinity(0)) + 1) if 8 % d == 0)
     assert f"on 8 envs ({devices} cpu device" in proc.stdout
@@ -52,8 +54,14 @@ def test_init_from_fine_tunes_from_another_runs_params(trained, tmp_path, cache_
         config.validate(config.TrainConfig(init_from=str(source), hidden=[32, 32], run_dir=str(tmp_path / "bad")))
     run_dir = tmp_path / "tuned"
     proc = run("train.py", *TINY, *NOISE, "--num_timesteps", "64", "--seed", "4", "--run_dir", str(run_dir),
-               "--init_from", str(source), env=cache_env)
+               "--init_from", str(source), "--no_eval_at_start", env=cache_env)
     assert f"starting from the params of {source} (its step 64)" in proc.stdout
+    # No evaluation before training: training compiles first, and the first row is after it.
+    assert [r["step"] for r in rows(run_dir)] == [64]
+    announced = [proc.stdout.index(line) for line in ("compiling the environment and training programs",
+                                                      "training compiled and its first rollout",
+                                                      "evaluation compiled and run in")]
+    assert announced == sorted(announced), proc.stdout
     cfg = config.load_config(run_dir)
     env = config.make_env_for(cfg)
     template = training.init_params(cfg, env)
