@@ -1,7 +1,8 @@
 """A training run's evaluations, run by hexa_mjx.training rather than inside brax's `ppo.train`.
 
 brax evaluates the untrained params before the first update and compiles its evaluation program
-twice: its fresh params carry weak-typed scalars that trained ones do not. On a 2-core CPU one
+twice: its fresh params carry weak-typed scalars that trained ones do not (and, with randomized
+physics, are not committed to a device while trained ones are). On a 2-core CPU one
 evaluation of 32 episodes x 1000 steps runs about 30 s and each compile 40 s. Run here, a run can
 skip the evaluation at step 0 (`--no_eval_at_start`), a resumed run skips the one of a checkpoint
 whose row is already logged, and one program serves every evaluation. The episodes are the ones
@@ -14,6 +15,7 @@ import functools
 
 import jax
 import jax.numpy as jp
+import numpy as np
 
 
 def brax_eval_key(seed: int, process_index: int = 0) -> jax.Array:
@@ -22,9 +24,12 @@ def brax_eval_key(seed: int, process_index: int = 0) -> jax.Array:
     return jax.random.split(jax.random.fold_in(local, process_index), 3)[2]
 
 
-def strong_types(tree):
-    """`tree` with every leaf strongly typed (a weak-typed leaf would compile a second program)."""
-    return jax.tree.map(lambda x: jp.asarray(x, dtype=jp.result_type(x)), tree)
+def fresh_copy(tree):
+    """`tree` as new device arrays, strongly typed and not committed to a device: the same input
+    types at every evaluation. (brax's fresh params have weak-typed leaves and trained ones do not;
+    params taken from a pmap are committed to device 0 and others are not; either difference
+    compiles the evaluation program again.)"""
+    return jax.tree.map(lambda x: jp.asarray(np.asarray(x)), tree)
 
 
 class RunEvaluator:
@@ -50,4 +55,4 @@ class RunEvaluator:
             self.evaluator = acting.Evaluator(self.env, functools.partial(make_policy, deterministic=True),
                                               num_eval_envs=self.num_eval_envs, episode_length=self.episode_length,
                                               action_repeat=1, key=self.key)
-        return self.evaluator.run_evaluation(strong_types(params), training_metrics={})
+        return self.evaluator.run_evaluation(fresh_copy(params), training_metrics={})
