@@ -13,7 +13,7 @@ run() {
   local start; start=$(date +%s.%N)
   "$PY" -u train.py --preset fast --num_timesteps 16384 --num_evals 2 --run_dir "/tmp/warm-$name" "$@" 2>&1 |
     while IFS= read -r line; do
-      printf '%s %6.1f %s\n' "$name" "$(echo "$(date +%s.%N) - $start" | bc)" "$line"
+      printf '%s %6.1f %s\n' "$name" "$(awk "BEGIN {print $(date +%s.%N) - $start}")" "$line"
     done
 }
 run A1; run A2; run B1 --no_progress --no_record_optimizer; run B2 --no_progress --no_record_optimizer
