@@ -214,8 +214,9 @@ class HexapodEnv(Env):
 
     def draw_failure(self, rng: jax.Array) -> jax.Array:
         """An episode's failed legs, (legs,) of 0/1: the fixed `disabled_legs`, or one leg drawn
-        (uniformly, or by `leg_failure_weights`) with probability `leg_failure_rate`. Drawn at reset and on an episode's last step
-        (so brax's auto-reset, which keeps `info`, starts the next episode with a new draw)."""
+        (uniformly, or by `leg_failure_weights`) with probability `leg_failure_rate`. Drawn at reset
+        and on an episode's last step (so brax's auto-reset, which keeps `info`, starts the next
+        episode with a new draw)."""
         legs = len(self.robot.legs)
         if self.config.leg_failure != "random":
             return jp.zeros(legs).at[jp.asarray(self.config.disabled_legs, jp.int32) - 1].set(1.0)

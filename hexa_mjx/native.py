@@ -185,7 +185,10 @@ class NativeEnv:
         mask = np.zeros(len(self.robot.legs))
         if self.config.leg_failure == "random":
             weights = np.asarray(self.config.leg_failure_weights, float)
-            leg = self.rng.choice(len(mask), p=weights / weights.sum()) if weights.size else self.rng.integers(len(mask))
+            if weights.size:
+                leg = self.rng.choice(len(mask), p=weights / weights.sum())
+            else:
+                leg = self.rng.integers(len(mask))
             mask[leg] = float(self.rng.uniform() < self.config.leg_failure_rate)
         else:
             mask[np.asarray(self.config.disabled_legs, int) - 1] = 1.0
