@@ -176,14 +176,9 @@ def _without_contacts(env):
     """A copy of `env` whose physics skips collision detection and contact forces."""
     import copy
 
-    from mujoco import mjx
-
     model = copy.copy(env.mj_model)
     model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
-    bare = copy.copy(env)
-    bare.mjx_model = mjx.put_model(model, impl="jax", device=jax.local_devices()[0])
-    bare._data0 = mjx.make_data(bare.mjx_model, impl="jax", device=jax.local_devices()[0])
-    return bare
+    return env.with_physics(model)
 
 
 def training_profile(num_envs: int = 256, repeats: int = 3, **overrides) -> dict:

@@ -18,12 +18,14 @@ an episode (brax's AutoResetWrapper restores only `pipeline_state` and `obs`).
 from __future__ import annotations
 
 import contextlib
+import copy
 import dataclasses
 import functools
 import io
 
 import jax
 import jax.numpy as jp
+import mujoco
 
 # mujoco.mjx (brax imports it too) prints a notice on import when the optional GPU-only warp
 # backend is absent.
@@ -71,13 +73,28 @@ class HexapodEnv(Env):
         self._qpos0, self._qvel0, self._ctrl0 = (jp.asarray(x, jp.float32) for x in
                                                  (self.robot.qpos0, self.robot.qvel0, self.robot.ctrl0))
         self._start_xy = jp.asarray(self.robot.start_xy, jp.float32)
-        # MJX's default device is jax.devices()[0], which only process 0 of a multi-process run can address.
-        device = jax.local_devices()[0]
-        self.mjx_model = mjx.put_model(self.mj_model, impl="jax", device=device)
-        self._data0 = mjx.make_data(self.mjx_model, impl="jax", device=device)
+        self._put_physics(self.mj_model)
         if self.config.max_contact_points > self.contact_slots:  # a cap above the slots would cap nothing
             raise ValueError(f"max_contact_points {self.config.max_contact_points} is above the model's "
                              f"{self.contact_slots} robot-floor contact slots; use 1 to {self.contact_slots}, or 0 for all")
+
+    def _put_physics(self, mj_model: mujoco.MjModel) -> None:
+        # MJX's default device is jax.devices()[0], which only process 0 of a multi-process run can address.
+        device = jax.local_devices()[0]
+        self.mjx_model = mjx.put_model(mj_model, impl="jax", device=device)
+        self._data0 = mjx.make_data(self.mjx_model, impl="jax", device=device)
+
+    def with_physics(self, mj_model: mujoco.MjModel) -> "HexapodEnv":
+        """A copy of this env whose physics runs `mj_model` instead (same robot and sizes; for
+        example with an option flag changed)."""
+        other = copy.copy(self)
+        other.mj_model = mj_model
+        other._put_physics(mj_model)
+        return other
+
+    def data_at(self, qpos: jax.Array) -> mjx.Data:
+        """Physics data at joint positions `qpos`, at rest, with kinematics and contacts computed."""
+        return mjx.forward(self.mjx_model, self._data0.replace(qpos=qpos))
 
     # -- brax Env interface -------------------------------------------------
 

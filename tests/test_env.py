@@ -160,7 +160,7 @@ def test_contact_cap_keeps_the_deepest_contacts(env, capped):
     qpos = np.array(env.mj_model.key_qpos[0])
     qpos[2] = 0.07
     def contacts(e):
-        data = jax.jit(lambda q: mjx.forward(e.mjx_model, e._data0.replace(qpos=q)))(jp.asarray(qpos, jp.float32))
+        data = jax.jit(e.data_at)(jp.asarray(qpos, jp.float32))
         return np.sort(np.asarray(floor_contacts(data)[2])), [int(x) for x in e.contact_counts(data)]
     all_dist, all_counts = contacts(env)
     cap_dist, cap_counts = contacts(capped)
@@ -219,7 +219,7 @@ def test_episode_boundary_under_brax_autoreset(env):
     assert np.all(np.asarray(state.metrics["success"]) == 1.0) and np.all(np.asarray(state.done) == 0)
     state = step(state, zeros)  # last step: truncated and reset
     assert np.all(np.asarray(state.done) == 1) and np.all(np.asarray(state.info["truncation"]) == 1)
-    np.testing.assert_allclose(state.pipeline_state.qpos[:, 0], env._qpos0[0], atol=1e-6)
+    np.testing.assert_allclose(state.pipeline_state.qpos[:, 0], env.qpos0[0], atol=1e-6)
     assert np.all(np.asarray(state.info["t"]) == 0) and np.all(np.asarray(state.info["success"]) == 0)
     state = step(state, zeros)  # first step of the new episode
     # A stale previous distance would give 1000 * (0.3 - 1.5) = -1200 here.
@@ -231,20 +231,20 @@ def test_start_noise_is_drawn_per_reset(env, state0):
     noisy = hexa_mjx.make_env(start_joint_noise=0.1, start_yaw_noise=0.3)
     states = jax.jit(jax.vmap(noisy.reset))(jax.random.split(jax.random.PRNGKey(1), 64))
     qpos = np.asarray(states.pipeline_state.qpos)
-    offsets = qpos[:, 7:] - np.asarray(env._qpos0[7:])
+    offsets = qpos[:, 7:] - env.qpos0[7:]
     assert np.abs(offsets).max() <= 0.1 + 1e-6 and np.abs(offsets).max() > 0.09  # fills the range
     assert len(np.unique(offsets[:, 0])) == 64  # a different start for every key
     low, high = env.mj_model.jnt_range[1:].T
     assert np.all(qpos[:, 7:] >= low - 1e-6) and np.all(qpos[:, 7:] <= high + 1e-6)
     w, z = qpos[:, 3], qpos[:, 6]  # the settled start is level, so the noise is a pure yaw
-    yaw = 2 * np.arctan2(z, w) - 2 * np.arctan2(float(env._qpos0[6]), float(env._qpos0[3]))
+    yaw = 2 * np.arctan2(z, w) - 2 * np.arctan2(env.qpos0[6], env.qpos0[3])
     assert np.abs(yaw).max() <= 0.3 + 1e-4 and np.abs(yaw).max() > 0.25
     np.testing.assert_allclose(np.linalg.norm(qpos[:, 3:7], axis=1), 1.0, atol=1e-6)
     np.testing.assert_allclose(states.obs, jax.vmap(noisy.observe)(states.pipeline_state), rtol=1e-6, atol=1e-9)
     # Without noise, every key gives the settled start exactly.
     other = jax.jit(env.reset)(jax.random.PRNGKey(7))
     np.testing.assert_array_equal(other.pipeline_state.qpos, state0.pipeline_state.qpos)
-    np.testing.assert_array_equal(state0.pipeline_state.qpos, env._qpos0)
+    np.testing.assert_array_equal(state0.pipeline_state.qpos, np.float32(env.qpos0))
 
 
 def test_every_variant_and_ablation_builds():
