@@ -4,8 +4,8 @@
     python -m hexa_mjx.plots --frames runs/goal_directed-s0/eval/episode_0.mp4 [--every 40 --count 6] -o frames.png
 
 One panel per figure (final distance to goal, success rate, episodic return, goal bonus; for
-navigation runs goals reached per episode instead of the bonus) against environment steps, one
-line per run, labelled by the run directory's name. `plot_paths` draws torso tracks from above.
+navigation runs goals reached per episode instead of the bonus; with a curriculum also falls and
+the mean level) against environment steps, one line per run, labelled by the run directory's name. `plot_paths` draws torso tracks from above.
 """
 
 from __future__ import annotations
@@ -25,25 +25,40 @@ def read_metrics(run_dir: Path) -> list[dict]:
     return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
 
 
+def panels_for(rows: list[dict]) -> list[tuple[str, str]]:
+    """The (metric, label) panels that suit a run: goals per episode instead of the bonus for
+    navigation, and the mean curriculum level when the run had a curriculum."""
+    panels = list(PANELS)
+    if any(r.get("goals_per_episode", 0) > 0 for r in rows):
+        panels[3] = ("goals_per_episode", "goals reached per episode")
+    if any("curriculum/level_mean" in r for r in rows):
+        panels += [("fall_rate", "falls (share of evaluation episodes)"),
+                   ("curriculum/level_mean", "mean curriculum level (0: easiest)")]
+    return panels
+
+
 def plot_runs(run_dirs: list[Path], out: Path, title: str = "") -> Path:
-    """Write a 2x2 PNG of the PANELS for each run."""
+    """Write a PNG of each run's panels (`panels_for` the first run), two rows."""
+    import math
+
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(2, 2, figsize=(11, 7), constrained_layout=True)
-    for run_dir in run_dirs:
-        rows = read_metrics(run_dir)
+    runs = [(Path(d).name, read_metrics(d)) for d in run_dirs]
+    panels = panels_for(runs[0][1])
+    cols = math.ceil(len(panels) / 2)
+    fig, axes = plt.subplots(2, cols, figsize=(5.5 * cols, 7), constrained_layout=True)
+    for name, rows in runs:
         steps = [r["step"] for r in rows]
-        panels = PANELS
-        if any(r.get("goals_per_episode", 0) > 0 for r in rows):
-            panels = PANELS[:3] + [("goals_per_episode", "goals reached per episode")]
         for ax, (key, label) in zip(axes.flat, panels):
-            ax.plot(steps, [r.get(key, float("nan")) for r in rows], marker="o", ms=3, label=Path(run_dir).name)
+            ax.plot(steps, [r.get(key, float("nan")) for r in rows], marker="o", ms=3, label=name)
             ax.set_xlabel("environment steps")
             ax.set_ylabel(label)
             ax.grid(alpha=0.3)
+    for ax in axes.flat[len(panels):]:
+        ax.remove()
     axes.flat[0].axhline(0.5, color="grey", ls="--", lw=1)  # success radius
     axes.flat[0].legend(fontsize=8)
     if title:

@@ -24,3 +24,17 @@ def test_plot_runs_writes_png(tmp_path):
 def test_missing_metrics_is_a_clear_error(tmp_path):
     with pytest.raises(FileNotFoundError, match="is .* a train.py run directory"):
         plots.read_metrics(tmp_path)
+
+
+def test_curriculum_runs_get_falls_and_level_panels(tmp_path):
+    rows = [{"step": s, "final_distance": 1.0, "success_rate": 0.5, "episode_return": 1.0, "goals_per_episode": 2.0,
+             "fall_rate": 0.1, "curriculum/level_mean": s / 1e6} for s in (0, 1e6)]
+    keys = [key for key, _ in plots.panels_for(rows)]
+    assert keys[3] == "goals_per_episode" and keys[-2:] == ["fall_rate", "curriculum/level_mean"]
+    plain = [{k: v for k, v in r.items() if not k.startswith("curriculum")} for r in rows]
+    assert "curriculum/level_mean" not in [key for key, _ in plots.panels_for(plain)]
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "metrics.jsonl").write_text("\n".join(json.dumps(r) for r in rows) + "\n")
+    image = mpimg.imread(plots.plot_runs([run], tmp_path / "c.png"))
+    assert image.shape[1] > 1.3 * image.shape[0]  # three panels wide
