@@ -5,7 +5,8 @@
 
 One panel per figure (final distance to goal, success rate, episodic return, goal bonus; for
 navigation runs goals reached per episode instead of the bonus; with a curriculum also falls and
-the mean level) against environment steps, one line per run, labelled by the run directory's name. `plot_paths` draws torso tracks from above.
+the mean level) against environment steps, one line per run, labelled by the run directory's
+name. `plot_paths` draws torso tracks from above.
 """
 
 from __future__ import annotations
