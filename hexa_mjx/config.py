@@ -95,6 +95,13 @@ class TrainConfig:
     leg_failure_weights: list = dataclasses.field(default_factory=list, metadata={
         "help": "relative chance of each leg (1, 2, ...) being the failed one (--leg_failure random), e.g. "
                 "1 1 3 3 1 1 to train more on legs 3 and 4 (default: uniform)", "nargs": "+", "type": float})
+    leg_failure_after: int = dataclasses.field(default=0, metadata={
+        "help": "training with --leg_failure random: no leg fails in the first this many env steps, so the "
+                "policy first learns to walk on six (hexa_mjx.failure_schedule)"})
+    leg_failure_adaptive: bool = dataclasses.field(default=False, metadata={
+        "help": "training with --leg_failure random: draw the failed leg by what losing it costs the policy now "
+                "(goals per episode against intact episodes, over the batch) instead of uniformly "
+                "(hexa_mjx.failure_schedule)"})
     failure_mode: str = dataclasses.field(default="limp", metadata={
         "help": "a failed leg's servos give no torque (limp) or hold the start angles (locked)",
         "choices": ["limp", "locked"]})
@@ -267,6 +274,14 @@ def validate(cfg: TrainConfig, writes: bool = True) -> TrainConfig:
             raise ConfigError(f"--{name} must be at least 1, got {getattr(cfg, name)}")
     if cfg.leg_failure_weights and cfg.leg_failure != "random":
         raise ConfigError("--leg_failure_weights weigh the legs of --leg_failure random; add it or drop the weights")
+    if (cfg.leg_failure_after or cfg.leg_failure_adaptive) and cfg.leg_failure != "random":
+        raise ConfigError("--leg_failure_after and --leg_failure_adaptive schedule --leg_failure random; add it or "
+                          "drop them")
+    if cfg.leg_failure_adaptive and cfg.leg_failure_weights:
+        raise ConfigError("--leg_failure_adaptive draws the failed leg by its cost; it replaces "
+                          "--leg_failure_weights: keep one of the two")
+    if cfg.leg_failure_after < 0:
+        raise ConfigError(f"--leg_failure_after is a number of env steps, 0 or more, got {cfg.leg_failure_after}")
     run_dir = Path(cfg.run_dir) if cfg.run_dir else default_run_dir(cfg)
     cfg = dataclasses.replace(cfg, run_dir=str(run_dir))
     if cfg.model and not Path(cfg.model).is_file():

@@ -192,7 +192,10 @@ class HexapodEnv(Env):
         success = jp.maximum(state.info["success"], reached.astype(jp.float32))
         info = {**state.info, "rng": rng, "t": jp.where(over, 0, t), "success": jp.where(over, 0.0, success),
                 "goals": jp.where(over, 0, goals), "level": level,
-                "failed_legs": jp.where(over, self.draw_failure(jax.random.fold_in(key, 3)), state.info["failed_legs"]),
+                "failed_legs": jp.where(over, self.draw_failure(jax.random.fold_in(key, 3),
+                                                                state.info.get("leg_failure_rate"),
+                                                                state.info.get("leg_failure_p")),
+                                        state.info["failed_legs"]),
                 "latency": jp.where(over, self.draw_latency(jax.random.fold_in(key, 4)), state.info["latency"])}
         # Start from the incoming metrics: wrappers (brax's evaluator) add keys of their own.
         metrics = {**state.metrics, **{f"reward/{name}": value for name, value in scaled.items()}}
@@ -229,17 +232,20 @@ class HexapodEnv(Env):
         """Whether any leg can fail (fixed disabled legs or random failures)."""
         return bool(self.config.disabled_legs) or self.config.leg_failure == "random"
 
-    def draw_failure(self, rng: jax.Array) -> jax.Array:
+    def draw_failure(self, rng: jax.Array, rate=None, p=None) -> jax.Array:
         """An episode's failed legs, (legs,) of 0/1: the fixed `disabled_legs`, or one leg drawn
         (uniformly, or by `leg_failure_weights`) with probability `leg_failure_rate`. Drawn at reset
         and on an episode's last step (so brax's auto-reset, which keeps `info`, starts the next
-        episode with a new draw)."""
+        episode with a new draw). A training schedule (`hexa_mjx.failure_schedule`) passes its own
+        `rate` and leg probabilities `p`."""
         legs = len(self.robot.legs)
         if self.config.leg_failure != "random":
             return jp.zeros(legs).at[jp.asarray(self.config.disabled_legs, jp.int32) - 1].set(1.0)
         k_which, k_whether = jax.random.split(rng)
-        fails = jax.random.uniform(k_whether) < self.config.leg_failure_rate
-        if self.config.leg_failure_weights:
+        fails = jax.random.uniform(k_whether) < (self.config.leg_failure_rate if rate is None else rate)
+        if p is not None:
+            leg = jax.random.choice(k_which, legs, p=p)
+        elif self.config.leg_failure_weights:
             leg = jax.random.choice(k_which, legs, p=jp.asarray(self.config.leg_failure_weights, jp.float32))
         else:
             leg = jax.random.randint(k_which, (), 0, legs)

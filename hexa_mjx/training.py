@@ -23,6 +23,7 @@ from hexa_mjx.checkpoints import (checkpoint_dir, list_checkpoints, load_checkpo
                                   save_checkpoint)
 from hexa_mjx.config import TrainConfig, init_checkpoint, make_env_for, validate
 from hexa_mjx.curriculum import LevelHistogram
+from hexa_mjx.failure_schedule import LegFailureRecord
 from hexa_mjx.jax_setup import devices_for, prepare_jax
 from hexa_mjx.optimizer_state import AdamRecorder, adam_template, recording
 from hexa_mjx.progress import Logger, keep_rows_up_to
@@ -87,23 +88,37 @@ def evals_for(cfg: TrainConfig, remaining: int) -> int:
     return 1 + max(1, math.ceil((cfg.num_evals - 1) * remaining / cfg.num_timesteps))
 
 
-def wrap_env_fn(env, randomized: bool = False, level_record=None, progress_record=None, progress_every: int = 64):
+def wrap_env_fn(env, randomized: bool = False, level_record=None, progress_record=None, progress_every: int = 64,
+                failure_schedule: dict | None = None):
     """brax's training wrappers, or ours that redraw the start state (and first goal) every episode,
     give each environment its own randomized model, report curriculum levels to `level_record`,
-    and report the training environments' progress to `progress_record`."""
+    report the training environments' progress to `progress_record`, and schedule their leg
+    failures (`failure_schedule`, hexa_mjx.failure_schedule)."""
     from hexa_mjx import wrappers
 
     fresh_starts = env.fresh_starts or randomized
-    if level_record is None and progress_record is None:
+    if level_record is None and progress_record is None and failure_schedule is None:
         return wrappers.wrap_for_training if fresh_starts else None
-    # brax wraps the training environments first, then the evaluation ones: only the first are watched.
-    progress = [progress_record]
+    # brax wraps the training environments first, then the evaluation ones: only the first are
+    # watched and scheduled; evaluations draw failures as configured.
+    first = [True]
 
     def wrap(env, **kwargs):
-        return wrappers.wrap_for_training(env, level_record=level_record, progress_record=progress.pop() if progress
-                                          else None, progress_every=progress_every, fresh_starts=fresh_starts,
-                                          **kwargs)
+        training = first.pop() if first else False
+        return wrappers.wrap_for_training(env, level_record=level_record,
+                                          progress_record=progress_record if training else None,
+                                          progress_every=progress_every, fresh_starts=fresh_starts,
+                                          failure_schedule=failure_schedule if training else None, **kwargs)
     return wrap
+
+
+def failure_schedule_for(cfg: TrainConfig, start_step: int, record=None) -> dict | None:
+    """`LegFailureSchedule`'s settings for a run (None without a schedule): `--leg_failure_after` in
+    control steps per environment, counted from `start_step` (a resumed run's checkpoint)."""
+    if not (cfg.leg_failure_after or cfg.leg_failure_adaptive):
+        return None
+    after = max(0, cfg.leg_failure_after - start_step)
+    return dict(start_after=-(-after // cfg.num_envs), adaptive=cfg.leg_failure_adaptive, record=record)
 
 
 def resume_point(cfg: TrainConfig, run_dir: Path, template, optimizer_template) -> tuple[int, object, object]:
@@ -168,6 +183,7 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
     logger = Logger(run_dir, cfg, start_step) if main else None
     # Where the curriculum's environments are, for each evaluation row (levels restart at 0 on resume).
     levels = LevelHistogram(cfg.curriculum_levels, devices_for(cfg)) if cfg.curriculum_levels else None
+    failures = LegFailureRecord(devices_for(cfg)) if failure_schedule_for(cfg, start_step) else None
 
     pending = {}  # the checkpoint brax handed over, saved once its evaluation row is written
     evaluations = {}  # each step's evaluation metrics, run in on_params and logged in on_progress
@@ -186,7 +202,8 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
     def on_progress(step, metrics):
         if logger is None:  # brax reports on process 0 only; kept safe for other callers
             return
-        logger(start_step + step, {**metrics, **evaluations.pop(step), **(levels.summary() if levels else {})})
+        logger(start_step + step, {**metrics, **evaluations.pop(step), **(levels.summary() if levels else {}),
+                                     **(failures.summary() if failures else {})})
         if step == 0:
             faults.point("training-started")
         elif step in pending:
@@ -219,7 +236,8 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
         ppo.train(environment=env, eval_env=eval_env, num_timesteps=remaining, **ppo_settings(cfg),
                   seed=cfg.seed + start_step, max_devices_per_host=devices,
                   wrap_env_fn=wrap_env_fn(env, cfg.randomize, levels, on_tap if cfg.progress else None,
-                                          progress_every=cfg.steps_per_update // cfg.num_envs),
+                                          progress_every=cfg.steps_per_update // cfg.num_envs,
+                                          failure_schedule=failure_schedule_for(cfg, start_step, failures)),
                   randomization_fn=randomization_fn,
                   num_evals=evals_for(cfg, remaining), num_eval_envs=cfg.num_eval_envs, run_evals=False,
                   progress_fn=on_progress, policy_params_fn=on_params, restore_params=restore)

@@ -16,6 +16,7 @@ from brax.envs.base import State, Wrapper
 from brax.envs.wrappers import training as brax_training
 
 from hexa_mjx.curriculum import LevelTap
+from hexa_mjx.failure_schedule import LegFailureSchedule
 
 
 def _where_done(done, new, old):
@@ -105,14 +106,17 @@ class ProgressTap(Wrapper):
 
 def wrap_for_training(env, episode_length: int = 1000, action_repeat: int = 1, randomization_fn=None,
                       level_record=None, progress_record=None, progress_every: int = 64,
-                      fresh_starts: bool = True):
+                      fresh_starts: bool = True, failure_schedule: dict | None = None):
     """brax's `envs.training.wrap` with `FreshStartAutoReset` in place of its AutoResetWrapper
     (brax's with `fresh_starts=False`) and `RandomizedVmap` in place of its VmapWrapper when there
-    is a `randomization_fn`. With a curriculum and a `level_record` callback, `curriculum.LevelTap`
-    reports the levels to it; with a `progress_record`, `ProgressTap` reports every `progress_every` steps."""
+    is a `randomization_fn`. `failure_schedule` (keyword arguments of
+    `failure_schedule.LegFailureSchedule`) schedules the training environments' leg failures. With a
+    curriculum and a `level_record` callback, `curriculum.LevelTap` reports the levels to it; with a
+    `progress_record`, `ProgressTap` reports every `progress_every` steps."""
     env = RandomizedVmap(env, randomization_fn) if randomization_fn else brax_training.VmapWrapper(env)
     env = brax_training.EpisodeWrapper(env, episode_length, action_repeat)
     env = FreshStartAutoReset(env) if fresh_starts else brax_training.AutoResetWrapper(env)
+    env = LegFailureSchedule(env, **failure_schedule) if failure_schedule is not None else env
     levels = env.unwrapped.config.curriculum_levels if level_record else 0  # brax's eval env has none
     env = LevelTap(env, levels, level_record) if levels else env
     return ProgressTap(env, progress_record, progress_every) if progress_record else env

@@ -1,0 +1,119 @@
+"""When training fails legs, and which: failures from a step count on, and the failed leg drawn by its cost.
+
+Two training-only settings of `--leg_failure random` (evaluation always draws as configured):
+
+- `--leg_failure_after N`: no leg fails in the first N environment steps, so the policy first
+  learns to walk on six legs (a run that failed legs from step 0 had not learnt to reach goals
+  within the hour; fine-tuning a walking policy had, docs/RESULTS.md "Walking on with a failed leg").
+- `--leg_failure_adaptive`: the failed leg is drawn by how much losing it costs the policy now,
+  instead of uniformly. The cost of leg k is its deficit in goals reached per episode against the
+  intact episodes, 1 - goals_k / goals_intact, over the training batch's finished episodes
+  (decayed with a half-life of HALF_LIFE control steps). A leg is drawn with probability
+  proportional to max(deficit, FLOOR) ** 2: twice the deficit, four times the practice. In the
+  navigation task goals per episode measure both speed and falls (a fall ends the episode); in the
+  report's task, with one goal, they are the success rate.
+
+`LegFailureSchedule` is a batch wrapper: it writes the rate and the leg probabilities into every
+environment's `info`, where `HexapodEnv.step` reads them for the next episode's draw.
+"""
+
+from __future__ import annotations
+
+import collections
+
+import jax
+import jax.numpy as jp
+import numpy as np
+from brax.envs.base import State, Wrapper
+
+FLOOR = 0.05  # smallest deficit a leg is weighed by: every leg keeps being drawn
+HALF_LIFE = 1000  # control steps per environment over which a finished episode's weight halves
+DECAY = 0.5 ** (1 / HALF_LIFE)
+TAP_EVERY = 500  # control steps of each environment between two snapshots sent to the host
+
+
+def leg_probabilities(stats: jax.Array) -> jax.Array:
+    """Probability of each leg being the failed one from `stats` (1 + legs, 2): the (decayed) sums of
+    goals reached and of episodes, intact first, then with leg 1, 2, ... failed."""
+    mean = stats[:, 0] / jp.maximum(stats[:, 1], 1e-9)
+    deficit = jp.clip(1.0 - mean[1:] / jp.maximum(mean[0], 1e-9), FLOOR, 1.0)
+    weight = deficit ** 2
+    return weight / weight.sum()
+
+
+def episode_stats(failed_legs: jax.Array, goals: jax.Array, ended: jax.Array) -> jax.Array:
+    """(1 + legs, 2) sums over a batch of [goals reached, episodes] of the episodes that `ended`,
+    by condition: intact, then each failed leg. `failed_legs` (batch, legs) is 0/1."""
+    condition = jp.concatenate([1.0 - failed_legs.sum(-1, keepdims=True), failed_legs], axis=-1)
+    weight = ended.astype(jp.float32)[:, None] * condition
+    return jp.stack([(weight * goals[:, None]).sum(0), weight.sum(0)], axis=-1)
+
+
+class LegFailureSchedule(Wrapper):
+    """Training environments' leg failures: none before `start_after` control steps per environment,
+    then at the configured rate, the leg drawn by `leg_probabilities` when `adaptive`. With a `record`
+    callback, sends the batch's statistics and probabilities to the host every TAP_EVERY steps."""
+
+    def __init__(self, env, start_after: int = 0, adaptive: bool = False, record=None, every: int = TAP_EVERY):
+        super().__init__(env)
+        self.start_after, self.adaptive, self.record, self.every = start_after, adaptive, record, every
+        config = env.unwrapped.config
+        self.rate = config.leg_failure_rate
+        legs = len(env.unwrapped.robot.legs)
+        weights = np.asarray(config.leg_failure_weights or [1.0] * legs, np.float32)
+        self.base_p = weights / weights.sum()
+
+    def reset(self, rng: jax.Array) -> State:
+        state = self.env.reset(rng)
+        batch = rng.shape[:-1]
+        legs = self.base_p.size
+        state.info["failure_clock"] = jp.zeros(batch, jp.int32)
+        state.info["leg_failure_rate"] = jp.full(batch, self.rate if self.start_after == 0 else 0.0, jp.float32)
+        state.info["leg_failure_p"] = jp.broadcast_to(jp.asarray(self.base_p), batch + (legs,))
+        # A prior of one episode with one goal in each condition: every leg alike until episodes end.
+        state.info["leg_failure_stats"] = jp.ones(batch + (legs + 1, 2), jp.float32)
+        if self.start_after:
+            state.info["failed_legs"] = jp.zeros_like(state.info["failed_legs"])
+        return state
+
+    def step(self, state: State, action: jax.Array) -> State:
+        failed, goals = state.info["failed_legs"], state.info["goals"]
+        state = self.env.step(state, action)
+        clock = state.info["failure_clock"] + 1
+        ended = state.info["t"] == 0  # HexapodEnv zeroes its step count when an episode ends
+        stats = DECAY * state.info["leg_failure_stats"][0] + episode_stats(
+            failed, goals + state.metrics["goals_reached"], ended)
+        p = leg_probabilities(stats) if self.adaptive else jp.asarray(self.base_p)
+        rate = jp.where(clock[0] >= self.start_after, self.rate, 0.0)
+        batch = clock.shape
+        state.info.update(failure_clock=clock, leg_failure_rate=jp.full(batch, rate, jp.float32),
+                          leg_failure_p=jp.broadcast_to(p, batch + p.shape),
+                          leg_failure_stats=jp.broadcast_to(stats, batch + stats.shape))
+        if self.record is not None:
+            jax.lax.cond(clock[0] % self.every == 0, lambda s: jax.debug.callback(self.record, *s), lambda s: None,
+                         (stats, p, rate))
+        return state
+
+
+class LegFailureRecord:
+    """Host side of `LegFailureSchedule`: the latest snapshot of each device's batch."""
+
+    def __init__(self, devices: int):
+        self._latest = collections.deque(maxlen=devices)
+
+    def __call__(self, stats, p, rate) -> None:
+        self._latest.append((stats, p, rate))  # references only: no device waits on the host
+
+    def summary(self) -> dict:
+        """{"leg_failure/rate", "leg_failure/p_leg<k>", "leg_failure/goals_intact", "leg_failure/goals_leg<k>"}
+        over the latest snapshots ({} before the first): goals per finished training episode."""
+        jax.effects_barrier()
+        if not self._latest:
+            return {}
+        stats = np.sum([np.asarray(s) for s, _, _ in self._latest], axis=0)
+        p = np.mean([np.asarray(q) for _, q, _ in self._latest], axis=0)
+        goals = stats[:, 0] / np.maximum(stats[:, 1], 1e-9)
+        return {"leg_failure/rate": float(np.mean([np.asarray(r) for _, _, r in self._latest])),
+                "leg_failure/goals_intact": float(goals[0]),
+                **{f"leg_failure/goals_leg{k}": float(g) for k, g in enumerate(goals[1:], start=1)},
+                **{f"leg_failure/p_leg{k}": float(q) for k, q in enumerate(p, start=1)}}

@@ -1,0 +1,82 @@
+"""The training schedule of leg failures: a start step, and legs drawn by what losing them costs."""
+
+import jax
+import jax.numpy as jp
+import numpy as np
+import pytest
+
+import hexa_mjx
+from hexa_mjx import failure_schedule as fs
+from hexa_mjx import training, wrappers
+from hexa_mjx.config import ConfigError, parse_args, validate
+
+BATCH, EPISODE = 6, 4
+
+
+def test_a_leg_is_drawn_by_the_square_of_its_deficit():
+    intact, legs = [10.0, 1.0], [[9.0, 1.0]] * 6  # goals per episode 10 intact, 9 with each leg failed
+    np.testing.assert_allclose(fs.leg_probabilities(jp.asarray([intact, *legs])), np.full(6, 1 / 6), rtol=1e-6)
+    legs[2] = [8.0, 2.0]  # leg 3: 4 goals per episode, a deficit of 0.6 against 0.1 for the others
+    p = np.asarray(fs.leg_probabilities(jp.asarray([intact, *legs])))
+    np.testing.assert_allclose(p[2], 0.36 / (0.36 + 5 * 0.01), rtol=1e-5)
+    legs[0] = [12.0, 1.0]  # better than intact: weighed by the floor, still drawn
+    p = np.asarray(fs.leg_probabilities(jp.asarray([intact, *legs])))
+    np.testing.assert_allclose(p[0], fs.FLOOR ** 2 / (fs.FLOOR ** 2 + 0.36 + 4 * 0.01), rtol=1e-5)
+
+
+def test_finished_episodes_are_summed_by_condition():
+    failed = jp.asarray([[0, 0, 1], [0, 0, 0], [0, 0, 1], [1, 0, 0]], jp.float32)
+    goals = jp.asarray([2.0, 5.0, 4.0, 7.0])
+    ended = jp.asarray([True, True, True, False])  # the last is still running: not counted
+    np.testing.assert_allclose(fs.episode_stats(failed, goals, ended), [[5, 1], [0, 0], [0, 0], [6, 2]])
+
+
+@pytest.fixture(scope="module")
+def scheduled():
+    env = hexa_mjx.make_env(task="navigate", leg_failure="random", leg_failure_rate=1.0, episode_length=EPISODE)
+    record = fs.LegFailureRecord(devices=1)
+    wrapped = wrappers.wrap_for_training(env, episode_length=EPISODE, failure_schedule=dict(
+        start_after=EPISODE + 2, adaptive=True, record=record, every=EPISODE))
+    return wrapped, jax.jit(wrapped.step), record
+
+
+def test_no_leg_fails_before_the_start_then_every_episode_has_one(scheduled):
+    env, step, record = scheduled
+    state = jax.jit(env.reset)(jax.random.split(jax.random.PRNGKey(0), BATCH))
+    assert float(state.info["failed_legs"].sum()) == 0  # the rate is 1, but not yet
+    counts = []
+    for t in range(1, 2 * EPISODE + 1):
+        before = np.asarray(state.info["leg_failure_stats"][0])
+        state = step(state, jp.zeros((BATCH, 18)))
+        counts.append(np.asarray(state.info["leg_failure_stats"][0])[:, 1] - fs.DECAY * before[:, 1])
+        if t == EPISODE:  # the first episodes end before the start: the next ones are intact too
+            assert float(state.info["failed_legs"].sum()) == 0
+            assert record.summary()["leg_failure/rate"] == 0.0
+    np.testing.assert_array_equal(state.info["failed_legs"].sum(-1), np.ones(BATCH))  # one leg each
+    counts = np.asarray(counts)
+    # Both batches of episodes that ended were intact, and nothing else ended.
+    ends = [EPISODE - 1, 2 * EPISODE - 1]
+    np.testing.assert_allclose(counts[ends], [[BATCH, 0, 0, 0, 0, 0, 0]] * 2, atol=1e-4)
+    np.testing.assert_allclose(np.delete(counts, ends, axis=0), 0, atol=1e-4)
+    summary = record.summary()
+    assert summary["leg_failure/rate"] == 1.0
+    assert abs(sum(summary[f"leg_failure/p_leg{k}"] for k in range(1, 7)) - 1) < 1e-5
+
+
+def test_evaluation_environments_are_not_scheduled():
+    env = hexa_mjx.make_env(task="navigate", leg_failure="random")
+    wrap = training.wrap_env_fn(env, failure_schedule=dict(start_after=10, adaptive=True))
+    assert isinstance(wrap(env), fs.LegFailureSchedule)  # brax wraps the training environments first
+    assert not isinstance(wrap(env), fs.LegFailureSchedule)
+
+
+@pytest.mark.parametrize("flags, message", [
+    (["--leg_failure_adaptive"], "add it or drop them"),
+    (["--leg_failure_after", "1000"], "add it or drop them"),
+    (["--leg_failure", "random", "--leg_failure_adaptive", "--leg_failure_weights", "1", "1", "3", "3", "1", "1"],
+     "keep one of the two"),
+    (["--leg_failure", "random", "--leg_failure_after", "-5"], "0 or more"),
+])
+def test_bad_schedules_are_refused_before_compiling(flags, message, tmp_path):
+    with pytest.raises(ConfigError, match=message):
+        validate(parse_args([*flags, "--run_dir", str(tmp_path / "run")]), writes=False)
