@@ -110,7 +110,8 @@ class Logger:
         done = step - self.start_step
         rate = done / elapsed if done > 0 and elapsed > 0 else math.nan
         row = {"step": step, "walltime_s": round(elapsed, 2), "env_steps_per_s": rate, **summarize(metrics),
-               **{k: float(v) for k, v in metrics.items() if k.startswith(("eval/episode_reward/", "curriculum/"))}}
+               **{k: float(v) for k, v in metrics.items()
+                  if k.startswith(("eval/episode_reward/", "curriculum/", "leg_failure/"))}}
         with open(self.path, "a") as f:
             f.write(json.dumps(row) + "\n")
         for key, value in row.items():
