@@ -1,5 +1,7 @@
 """The training schedule of leg failures: a start step, and legs drawn by what losing them costs."""
 
+import json
+
 import jax
 import jax.numpy as jp
 import numpy as np
@@ -80,3 +82,14 @@ def test_evaluation_environments_are_not_scheduled():
 def test_bad_schedules_are_refused_before_compiling(flags, message, tmp_path):
     with pytest.raises(ConfigError, match=message):
         validate(parse_args([*flags, "--run_dir", str(tmp_path / "run")]), writes=False)
+
+
+def test_the_schedule_is_logged_in_the_runs_rows(tmp_path):
+    from hexa_mjx.progress import Logger
+
+    cfg = parse_args(["--leg_failure", "random", "--leg_failure_adaptive", "--run_dir", str(tmp_path)])
+    logger = Logger(tmp_path, cfg, 0)
+    logger(16384, {"leg_failure/p_leg3": 0.4, "leg_failure/goals_intact": 9.5, "other/thing": 1.0})
+    logger.close()
+    row = json.loads((tmp_path / "metrics.jsonl").read_text().splitlines()[-1])
+    assert row["leg_failure/p_leg3"] == 0.4 and row["leg_failure/goals_intact"] == 9.5 and "other/thing" not in row
