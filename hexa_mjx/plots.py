@@ -5,8 +5,9 @@
 
 One panel per figure (final distance to goal, success rate, episodic return, goal bonus; for
 navigation runs goals reached per episode instead of the bonus; with a curriculum also falls and
-the mean level) against environment steps, one line per run, labelled by the run directory's
-name. `plot_paths` draws torso tracks from above.
+the mean level; with a leg-failure schedule falls and each leg's chance of failing) against
+environment steps, one line per run, labelled by the run directory's name. `plot_paths` draws
+torso tracks from above.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import argparse
 import json
 from pathlib import Path
 
+LEG_P = "leg_failure/p_leg"  # metrics.jsonl's key prefix of each leg's chance of failing (hexa_mjx.failure_schedule)
 PANELS = [("final_distance", "distance to goal at episode end (m)"), ("success_rate", "success rate"),
           ("episode_return", "episodic return"), ("goal_bonus", "goal bonus per episode")]
 
@@ -32,10 +34,20 @@ def panels_for(rows: list[dict]) -> list[tuple[str, str]]:
     panels = list(PANELS)
     if any(r.get("goals_per_episode", 0) > 0 for r in rows):
         panels[3] = ("goals_per_episode", "goals reached per episode")
+    falls = ("fall_rate", "falls (share of evaluation episodes)")
     if any("curriculum/level_mean" in r for r in rows):
-        panels += [("fall_rate", "falls (share of evaluation episodes)"),
-                   ("curriculum/level_mean", "mean curriculum level (0: easiest)")]
+        panels += [falls, ("curriculum/level_mean", "mean curriculum level (0: easiest)")]
+    if any(f"{LEG_P}1" in r for r in rows):
+        panels += [falls] * (falls not in panels) + [(f"{LEG_P}*", "chance of each leg being the failed one")]
     return panels
+
+
+def series(rows: list[dict], key: str) -> dict[str, list[float]]:
+    """{line label suffix: values} of a panel's `key`: one line, or one per leg for `<prefix>*`."""
+    if not key.endswith("*"):
+        return {"": [r.get(key, float("nan")) for r in rows]}
+    legs = sorted({int(k[len(key) - 1:]) for r in rows for k in r if k.startswith(key[:-1])})
+    return {f" leg {leg}": [r.get(f"{key[:-1]}{leg}", float("nan")) for r in rows] for leg in legs}
 
 
 def plot_runs(run_dirs: list[Path], out: Path, title: str = "") -> Path:
@@ -54,7 +66,10 @@ def plot_runs(run_dirs: list[Path], out: Path, title: str = "") -> Path:
     for name, rows in runs:
         steps = [r["step"] for r in rows]
         for ax, (key, label) in zip(axes.flat, panels):
-            ax.plot(steps, [r.get(key, float("nan")) for r in rows], marker="o", ms=3, label=name)
+            for suffix, values in series(rows, key).items():
+                ax.plot(steps, values, marker="o", ms=3, label=name + suffix)
+            if key.endswith("*"):
+                ax.legend(fontsize=7)
             ax.set_xlabel("environment steps")
             ax.set_ylabel(label)
             ax.grid(alpha=0.3)

@@ -38,3 +38,16 @@ def test_curriculum_runs_get_falls_and_level_panels(tmp_path):
     (run / "metrics.jsonl").write_text("\n".join(json.dumps(r) for r in rows) + "\n")
     image = mpimg.imread(plots.plot_runs([run], tmp_path / "c.png"))
     assert image.shape[1] > 1.3 * image.shape[0]  # three panels wide
+
+
+def test_scheduled_leg_failure_runs_get_one_line_per_leg(tmp_path):
+    rows = [{"step": s, "final_distance": 1.0, "success_rate": 0.5, "episode_return": 1.0, "goals_per_episode": 2.0,
+             "fall_rate": 0.1, **{f"leg_failure/p_leg{k}": k / 21 for k in range(1, 7)}} for s in (0, 1e6)]
+    panels = [key for key, _ in plots.panels_for(rows)]
+    assert panels[-2:] == ["fall_rate", "leg_failure/p_leg*"]
+    lines = plots.series(rows, "leg_failure/p_leg*")
+    assert list(lines) == [f" leg {k}" for k in range(1, 7)] and lines[" leg 3"] == [3 / 21, 3 / 21]
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "metrics.jsonl").write_text("\n".join(json.dumps(r) for r in rows) + "\n")
+    assert mpimg.imread(plots.plot_runs([run], tmp_path / "c.png")).std() > 0.01
