@@ -97,7 +97,7 @@ class TrainConfig:
                 "1 1 3 3 1 1 to train more on legs 3 and 4 (default: uniform)", "nargs": "+", "type": float})
     leg_failure_after: int = dataclasses.field(default=0, metadata={
         "help": "training with --leg_failure random: no leg fails in the first this many env steps, so the "
-                "policy first learns to walk on six (hexa_mjx.failure_schedule)"})
+                "policy first learns to walk intact (hexa_mjx.failure_schedule)"})
     leg_failure_adaptive: bool = dataclasses.field(default=False, metadata={
         "help": "training with --leg_failure random: draw the failed leg by what losing it costs the policy now "
                 "(goals per episode against intact episodes, over the batch) instead of uniformly "

@@ -3,7 +3,7 @@
 Two training-only settings of `--leg_failure random` (evaluation always draws as configured):
 
 - `--leg_failure_after N`: no leg fails in the first N environment steps, so the policy first
-  learns to walk on six legs (a run that failed legs from step 0 had not learnt to reach goals
+  learns to walk intact (a run that failed legs from step 0 had not learnt to reach goals
   within the hour; fine-tuning a walking policy had, docs/RESULTS.md "Walking on with a failed leg").
 - `--leg_failure_adaptive`: the failed leg is drawn by how much losing it costs the policy now,
   instead of uniformly. The cost of leg k is its deficit in goals reached per episode against the
