@@ -26,10 +26,11 @@ import jax.numpy as jp
 import numpy as np
 from brax.envs.base import State, Wrapper
 
+from hexa_mjx.curriculum import TAP_EVERY  # the same host snapshot spacing as the curriculum's levels
+
 FLOOR = 0.05  # smallest deficit a leg is weighed by: every leg keeps being drawn
 HALF_LIFE = 1000  # control steps per environment over which a finished episode's weight halves
 DECAY = 0.5 ** (1 / HALF_LIFE)
-TAP_EVERY = 500  # control steps of each environment between two snapshots sent to the host
 
 
 def leg_probabilities(stats: jax.Array) -> jax.Array:

@@ -112,13 +112,13 @@ def wrap_env_fn(env, randomized: bool = False, level_record=None, progress_recor
     return wrap
 
 
-def failure_schedule_for(cfg: TrainConfig, start_step: int, record=None) -> dict | None:
+def failure_schedule_for(cfg: TrainConfig, start_step: int) -> dict | None:
     """`LegFailureSchedule`'s settings for a run (None without a schedule): `--leg_failure_after` in
     control steps per environment, counted from `start_step` (a resumed run's checkpoint)."""
     if not (cfg.leg_failure_after or cfg.leg_failure_adaptive):
         return None
     after = max(0, cfg.leg_failure_after - start_step)
-    return dict(start_after=-(-after // cfg.num_envs), adaptive=cfg.leg_failure_adaptive, record=record)
+    return dict(start_after=-(-after // cfg.num_envs), adaptive=cfg.leg_failure_adaptive)
 
 
 def resume_point(cfg: TrainConfig, run_dir: Path, template, optimizer_template) -> tuple[int, object, object]:
@@ -183,7 +183,8 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
     logger = Logger(run_dir, cfg, start_step) if main else None
     # Where the curriculum's environments are, for each evaluation row (levels restart at 0 on resume).
     levels = LevelHistogram(cfg.curriculum_levels, devices_for(cfg)) if cfg.curriculum_levels else None
-    failures = LegFailureRecord(devices_for(cfg)) if failure_schedule_for(cfg, start_step) else None
+    schedule = failure_schedule_for(cfg, start_step)
+    failures = LegFailureRecord(devices_for(cfg)) if schedule else None
 
     pending = {}  # the checkpoint brax handed over, saved once its evaluation row is written
     evaluations = {}  # each step's evaluation metrics, run in on_params and logged in on_progress
@@ -237,7 +238,7 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
                   seed=cfg.seed + start_step, max_devices_per_host=devices,
                   wrap_env_fn=wrap_env_fn(env, cfg.randomize, levels, on_tap if cfg.progress else None,
                                           progress_every=cfg.steps_per_update // cfg.num_envs,
-                                          failure_schedule=failure_schedule_for(cfg, start_step, failures)),
+                                          failure_schedule=schedule and {**schedule, "record": failures}),
                   randomization_fn=randomization_fn,
                   num_evals=evals_for(cfg, remaining), num_eval_envs=cfg.num_eval_envs, run_evals=False,
                   progress_fn=on_progress, policy_params_fn=on_params, restore_params=restore)

@@ -93,3 +93,11 @@ def test_the_schedule_is_logged_in_the_runs_rows(tmp_path):
     logger.close()
     row = json.loads((tmp_path / "metrics.jsonl").read_text().splitlines()[-1])
     assert row["leg_failure/p_leg3"] == 0.4 and row["leg_failure/goals_intact"] == 9.5 and "other/thing" not in row
+
+
+def test_the_start_is_counted_per_environment_from_the_checkpoint():
+    cfg = parse_args(["--leg_failure", "random", "--leg_failure_after", "1000", "--num_envs", "256"])
+    assert training.failure_schedule_for(cfg, 0) == dict(start_after=4, adaptive=False)  # 1000 / 256, rounded up
+    assert training.failure_schedule_for(cfg, 600)["start_after"] == 2  # 400 steps left on resume
+    assert training.failure_schedule_for(cfg, 5000)["start_after"] == 0
+    assert training.failure_schedule_for(parse_args(["--leg_failure", "random"]), 0) is None
