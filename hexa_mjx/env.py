@@ -135,6 +135,7 @@ class HexapodEnv(Env):
         info = {"rng": rng, "t": jp.zeros((), jp.int32), "success": zero, "goals": jp.zeros((), jp.int32),
                 "level": jp.zeros((), jp.int32),  # the curriculum's level (hexa_mjx.curriculum), kept across episodes
                 "failed_legs": self.draw_failure(jax.random.fold_in(rng, 3)),
+                "air_time": jp.zeros(len(self.robot.legs)),  # s since each foot last touched the floor
                 "latency": self.draw_latency(jax.random.fold_in(rng, 4))}
         return State(data, self.noisy(self.observe(data), jax.random.fold_in(rng, 5)), zero, zero, metrics, info)
 
@@ -177,8 +178,9 @@ class HexapodEnv(Env):
         dist = self.goal_distance(data)
         reached = dist < self.config.success_radius
         completed = self.goal_completed(reached, state.info["goals"])
-        scaled = {name: self.scales[name] * value
-                  for name, value in self.reward_terms(prev, data, done, completed).items()}
+        air_time = jp.where(self.foot_stance(data), 0.0, state.info["air_time"] + self.dt)
+        scaled = {name: self.scales[name] * value for name, value in
+                  self.reward_terms(prev, data, done, completed, air_time, state.info["failed_legs"]).items()}
         reward = sum(scaled.values())
 
         t = state.info["t"] + 1
@@ -196,6 +198,7 @@ class HexapodEnv(Env):
                                                                 state.info.get("leg_failure_rate"),
                                                                 state.info.get("leg_failure_p")),
                                         state.info["failed_legs"]),
+                "air_time": jp.where(over, 0.0, air_time),
                 "latency": jp.where(over, self.draw_latency(jax.random.fold_in(key, 4)), state.info["latency"])}
         # Start from the incoming metrics: wrappers (brax's evaluator) add keys of their own.
         metrics = {**state.metrics, **{f"reward/{name}": value for name, value in scaled.items()}}
@@ -299,18 +302,24 @@ class HexapodEnv(Env):
         floor = self.robot.floor
         return (dist < 0) & ((geom1 == floor) | (geom2 == floor)), jp.where(geom1 == floor, geom2, geom1)
 
+    def foot_stance(self, data: mjx.Data) -> jax.Array:
+        """Whether each foot touches the floor, (legs,) bool."""
+        return self.robot.foot_stance(*floor_contacts(data))
+
     def contact_counts(self, data: mjx.Data):
         """Floor contacts of a physics state: (leg contacts while that leg's foot is lifted
         more than `lift_clearance`, contacts of any non-foot geom), from MJX's contact arrays."""
         return self.robot.contact_counts(*floor_contacts(data), data.geom_xpos[self.feet],
                                          self.config.lift_clearance)
 
-    def reward_terms(self, prev: mjx.Data, data: mjx.Data, done, completed) -> dict:
-        """Unscaled values of the active reward terms for the transition prev -> data."""
+    def reward_terms(self, prev: mjx.Data, data: mjx.Data, done, completed, air_time=0.0, failed_legs=0.0) -> dict:
+        """Unscaled values of the active reward terms for the transition prev -> data, with each
+        foot's time off the floor (s) and the failed legs (0/1) after it."""
         bad, non_foot = self.contact_counts(data)
         power = servo_power(data.actuator_force, data.qvel, self.robot.actuator_dof)
         return rewards.terms(self._active_terms(), self.config, prev.qpos, data.qpos, data.qvel, self.goal(data),
-                             bad, non_foot, done, completed, power, ground=self.robot.ground(data.qpos[:2]))
+                             bad, non_foot, done, completed, power, ground=self.robot.ground(data.qpos[:2]),
+                             air_time=air_time, working=1.0 - failed_legs)
 
     # -- what a task defines ----------------------------------------------------
 

@@ -39,12 +39,6 @@ def group_contacts(env, data, groups) -> jax.Array:
     return jp.stack([(on_floor & (group == g)).sum() for g in range(len(CONTACT_GROUPS))])
 
 
-def foot_stance(env, data) -> jax.Array:
-    """Whether each foot touches the floor, (legs,) bool."""
-    on_floor, geom = env.floor_contact_geoms(data)
-    return (on_floor[None] & (geom[None] == jp.asarray(env.feet)[:, None])).any(1)
-
-
 def rollout(env, policy, num_episodes: int, seed: int = 0, ranges=None):
     """Run `num_episodes` episodes in parallel to their end; returns per-step arrays (time first)
     of qpos, the goal each step is scored against, reward, done, distance, floor contacts per
@@ -78,7 +72,7 @@ def rollout(env, policy, num_episodes: int, seed: int = 0, ranges=None):
             out = {"qpos": nxt.pipeline_state.qpos, "goal": jax.vmap(env.goal)(state.pipeline_state),
                    "reward": nxt.reward, "done": nxt.done, "alive": alive,
                    "contacts": jax.vmap(lambda d: group_contacts(env, d, groups))(nxt.pipeline_state),
-                   "stance": jax.vmap(lambda d: foot_stance(env, d))(nxt.pipeline_state),
+                   "stance": jax.vmap(env.foot_stance)(nxt.pipeline_state),
                    "power": jax.vmap(lambda d: servo_power(d.actuator_force, d.qvel, env.robot.actuator_dof))(
                        nxt.pipeline_state),
                    **{k: v for k, v in nxt.metrics.items()

@@ -8,8 +8,11 @@ Two training-only settings of `--leg_failure random` (evaluation always draws as
 - `--leg_failure_adaptive`: the failed leg is drawn by how much losing it costs the policy now,
   instead of uniformly. The cost of leg k is its deficit in goals reached per episode against the
   intact episodes, 1 - goals_k / goals_intact, over the training batch's finished episodes
-  (decayed with a half-life of HALF_LIFE control steps). A leg is drawn with probability
-  proportional to max(deficit, FLOOR) ** 2: twice the deficit, four times the practice. In the
+  (decayed with a half-life of HALF_LIFE control steps). UNIFORM_SHARE of the draws are uniform
+  over the legs; the rest go to each leg in proportion to max(deficit, FLOOR) ** 2: twice the
+  deficit, four times the practice. The uniform share keeps every leg in practice, as prioritized
+  replay keeps a floor: a deficit-only draw starved the legs a gait did not use yet and spent most
+  of the practice on legs it could not yet learn to lose (docs/RESULTS.md, session 15). In the
   navigation task goals per episode measure both speed and falls (a fall ends the episode); in the
   report's task, with one goal, they are the success rate.
 
@@ -28,7 +31,8 @@ from brax.envs.base import State, Wrapper
 
 from hexa_mjx.curriculum import TAP_EVERY  # the same host snapshot spacing as the curriculum's levels
 
-FLOOR = 0.05  # smallest deficit a leg is weighed by: every leg keeps being drawn
+FLOOR = 0.05  # smallest deficit a leg is weighed by
+UNIFORM_SHARE = 0.5  # of the failures, drawn uniformly over the legs whatever their deficits
 HALF_LIFE = 1000  # control steps per environment over which a finished episode's weight halves
 DECAY = 0.5 ** (1 / HALF_LIFE)
 
@@ -39,7 +43,7 @@ def leg_probabilities(stats: jax.Array) -> jax.Array:
     mean = stats[:, 0] / jp.maximum(stats[:, 1], 1e-9)
     deficit = jp.clip(1.0 - mean[1:] / jp.maximum(mean[0], 1e-9), FLOOR, 1.0)
     weight = deficit ** 2
-    return weight / weight.sum()
+    return UNIFORM_SHARE / weight.size + (1.0 - UNIFORM_SHARE) * weight / weight.sum()
 
 
 def episode_stats(failed_legs: jax.Array, goals: jax.Array, ended: jax.Array) -> jax.Array:

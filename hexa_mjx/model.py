@@ -114,6 +114,13 @@ class RobotModel:
         """Ground height (m) under the points `xy` (..., 2): 0 on the flat floor."""
         return terrains.ground_height(self.terrain, xy)
 
+    def foot_stance(self, geom1, geom2, dist):
+        """Whether each foot touches the floor, (legs,) bool, from contact arrays of either engine."""
+        xp = namespace(dist)
+        on_floor = (dist < 0) & ((geom1 == self.floor) | (geom2 == self.floor))
+        other = xp.where(geom1 == self.floor, geom2, geom1)
+        return (on_floor[None] & (other[None] == xp.asarray(self.feet)[:, None])).any(1)
+
     def contact_counts(self, geom1, geom2, dist, foot_pos, lift_clearance: float):
         """(leg contacts while that leg's foot is lifted more than `lift_clearance` m above the
         ground under it, contacts of any non-foot geom) among contacts with the floor, from contact

@@ -62,6 +62,15 @@ def body_contact(non_foot_contacts):
     return non_foot_contacts.astype("float32")
 
 
+IDLE_AIR_TIME = 1.0  # s: four strides of the navigation gaits (about 4 Hz); a foot up longer is a leg left out
+
+
+def idle_feet(air_time, working):
+    """Working feet (0/1 each) that have been off the floor for more than IDLE_AIR_TIME; `air_time`
+    is each foot's time since it last touched the floor, s. A failed leg is not counted."""
+    return (working * (air_time > IDLE_AIR_TIME)).sum()
+
+
 def termination(flipped):
     """1 on the step the episode ends by a fall (or a non-finite physics state)."""
     return flipped.astype("float32")
@@ -80,14 +89,15 @@ def forward_velocity(vel_xy):
 TERMS = {
     f.__name__: f
     for f in (goal_approach, goal_reached, velocity_alignment, goal_bonus, stability, height, energy, mechanical_power,
-              contact_quality, body_contact, termination, forward_progress, forward_velocity)
+              contact_quality, body_contact, idle_feet, termination, forward_progress, forward_velocity)
 }
 
 def terms(names, config, prev_qpos, qpos, qvel, goal_xy, bad_contacts, non_foot_contacts, done, completed,
-          power, ground=0.0) -> dict:
+          power, ground=0.0, air_time=0.0, working=1.0) -> dict:
     """Unscaled values of the terms `names` for the transition prev_qpos -> (qpos, qvel), with
     `goal_xy` the step's goal, contact counts and servo power (W) of the new state, `ground` the
-    terrain's height (m) under the torso, and `config` an EnvConfig.
+    terrain's height (m) under the torso, each foot's `air_time` (s) and whether its leg is
+    `working` (0/1), and `config` an EnvConfig.
     Either engine's arrays; under jit, XLA drops the inputs no named term uses."""
     xp = namespace(qpos)
     xy, prev_xy, vel_xy = qpos[:2], prev_qpos[:2], qvel[:2]
@@ -107,6 +117,7 @@ def terms(names, config, prev_qpos, qpos, qvel, goal_xy, bad_contacts, non_foot_
         "mechanical_power": (power,),
         "contact_quality": (bad_contacts,),
         "body_contact": (non_foot_contacts,),
+        "idle_feet": (air_time, working),
         "termination": (done,),
         "forward_progress": (prev_xy, xy),
         "forward_velocity": (vel_xy,),
@@ -121,6 +132,7 @@ _SHAPING = {
     "energy": -1e-4,
     "contact_quality": -0.5,
     "body_contact": -1.0,
+    "idle_feet": 0.0,  # off unless asked for (--reward_scale idle_feet=-5): a stance for every working leg
     "termination": -200.0,  # the report's code: -200 for a flip
 }
 

@@ -102,6 +102,21 @@ def test_native_rewards_match_mjx_from_the_same_state(env, step, state0):
     assert len(gaps) == 15 and np.median(gaps) < 1e-3
 
 
+def test_native_air_time_matches_mjx(env, step, state0):
+    """Both engines count each foot's time off the floor the same way (the idle_feet term's input)."""
+    data = state0.pipeline_state
+    lifted = state0.replace(pipeline_state=data.replace(qpos=data.qpos.at[2].add(0.3)))
+    native = NativeEnv(env.config)
+    native.reset(seed=0)
+    copy_state(native, lifted.pipeline_state)
+    state = lifted
+    for _ in range(4):
+        state = step(state, jp.zeros(env.action_size))
+        native.step(np.zeros(env.action_size))
+    np.testing.assert_allclose(native.air_time, np.asarray(state.info["air_time"]), rtol=1e-5)
+    assert native.air_time.min() > 0
+
+
 def test_player_follows_the_mjx_rollout(env, step, state0, shipped):
     """Same start, same policy: the native trajectory matches MJX's closely for the first 0.25 s,
     and both reach the goal within 10 s; after that, contact events diverge (docs/RESULTS.md)."""

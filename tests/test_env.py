@@ -65,6 +65,18 @@ def test_action_maps_to_joint_limits(env, step, state0, value):
     np.testing.assert_allclose(hi, joint_hi)
 
 
+def test_air_time_counts_while_the_feet_are_off_the_floor(env, step, state0):
+    assert float(state0.info["air_time"].sum()) == 0.0  # all six feet down at the start
+    data = state0.pipeline_state
+    state = state0.replace(pipeline_state=data.replace(qpos=data.qpos.at[2].add(0.3)))  # 30 cm up: ~0.25 s of fall
+    for _ in range(5):
+        state = step(state, jp.zeros(env.action_size))
+    np.testing.assert_allclose(state.info["air_time"], np.full(6, 5 * env.dt), rtol=1e-5)
+    assert not bool(env.foot_stance(state.pipeline_state).any())
+    last = state.replace(info={**state.info, "t": jp.int32(env.config.episode_length - 1)})
+    assert float(step(last, jp.zeros(env.action_size)).info["air_time"].sum()) == 0.0  # a new episode starts down
+
+
 def test_wrong_action_shape_is_rejected(env, state0):
     with pytest.raises(ValueError, match=r"action must have shape \(18,\)"):
         env.step(state0, jp.zeros(17))

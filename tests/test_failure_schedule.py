@@ -15,15 +15,21 @@ from hexa_mjx.config import ConfigError, parse_args, validate
 BATCH, EPISODE = 6, 4
 
 
-def test_a_leg_is_drawn_by_the_square_of_its_deficit():
+def test_a_leg_is_drawn_by_the_square_of_its_deficit_beside_a_uniform_share(monkeypatch):
     intact, legs = [10.0, 1.0], [[9.0, 1.0]] * 6  # goals per episode 10 intact, 9 with each leg failed
     np.testing.assert_allclose(fs.leg_probabilities(jp.asarray([intact, *legs])), np.full(6, 1 / 6), rtol=1e-6)
     legs[2] = [8.0, 2.0]  # leg 3: 4 goals per episode, a deficit of 0.6 against 0.1 for the others
+    share = fs.UNIFORM_SHARE
     p = np.asarray(fs.leg_probabilities(jp.asarray([intact, *legs])))
-    np.testing.assert_allclose(p[2], 0.36 / (0.36 + 5 * 0.01), rtol=1e-5)
-    legs[0] = [12.0, 1.0]  # better than intact: weighed by the floor, still drawn
+    np.testing.assert_allclose(p[2], share / 6 + (1 - share) * 0.36 / (0.36 + 5 * 0.01), rtol=1e-5)
+    legs[0] = [12.0, 1.0]  # better than intact: weighed by the floor
     p = np.asarray(fs.leg_probabilities(jp.asarray([intact, *legs])))
-    np.testing.assert_allclose(p[0], fs.FLOOR ** 2 / (fs.FLOOR ** 2 + 0.36 + 4 * 0.01), rtol=1e-5)
+    np.testing.assert_allclose(p[0], share / 6 + (1 - share) * fs.FLOOR ** 2 / (fs.FLOOR ** 2 + 0.36 + 4 * 0.01),
+                               rtol=1e-5)
+    assert p.min() >= share / 6 - 1e-7  # every leg keeps its uniform share
+    monkeypatch.setattr(fs, "UNIFORM_SHARE", 0.0)  # by deficit alone
+    p = np.asarray(fs.leg_probabilities(jp.asarray([intact, *legs])))
+    np.testing.assert_allclose(p[2], 0.36 / (fs.FLOOR ** 2 + 0.36 + 4 * 0.01), rtol=1e-5)
 
 
 def test_finished_episodes_are_summed_by_condition():

@@ -46,6 +46,16 @@ def test_shaping_penalties():
     assert scaled("termination", jp.bool_(False)) == 0.0
 
 
+def test_idle_feet_counts_working_feet_up_longer_than_the_limit():
+    limit = rewards.IDLE_AIR_TIME
+    air = jp.asarray([0.0, limit + 0.1, limit - 0.1, 3.0, limit + 0.01, 0.2])
+    assert float(rewards.idle_feet(air, jp.ones(6))) == 3.0  # legs 2, 4 and 5
+    failed_leg_4 = jp.asarray([1.0, 1.0, 1.0, 0.0, 1.0, 1.0])  # a limp leg's foot is not the policy's
+    assert float(rewards.idle_feet(air, failed_leg_4)) == 2.0
+    assert rewards.make_scales("navigate")["idle_feet"] == 0.0  # off unless asked for
+    assert rewards.make_scales("navigate", overrides={"idle_feet": -5})["idle_feet"] == -5.0
+
+
 def test_forward_motion_terms():
     # 1000 * d_moved * cos(theta): 2 cm at 60 degrees off +x gives 1 cm of forward progress
     prev, now = jp.array([0.0, 0.0]), jp.array([0.02 * np.cos(np.pi / 3), 0.02 * np.sin(np.pi / 3)])
