@@ -136,6 +136,7 @@ class HexapodEnv(Env):
                 "level": jp.zeros((), jp.int32),  # the curriculum's level (hexa_mjx.curriculum), kept across episodes
                 "failed_legs": self.draw_failure(jax.random.fold_in(rng, 3)),
                 "air_time": jp.zeros(len(self.robot.legs)),  # s since each foot last touched the floor
+                "stance_avg": jp.ones(len(self.robot.legs)),  # running share of time on the floor (all down)
                 "latency": self.draw_latency(jax.random.fold_in(rng, 4))}
         return State(data, self.noisy(self.observe(data), jax.random.fold_in(rng, 5)), zero, zero, metrics, info)
 
@@ -178,9 +179,11 @@ class HexapodEnv(Env):
         dist = self.goal_distance(data)
         reached = dist < self.config.success_radius
         completed = self.goal_completed(reached, state.info["goals"])
-        air_time = jp.where(self.foot_stance(data), 0.0, state.info["air_time"] + self.dt)
-        scaled = {name: self.scales[name] * value for name, value in
-                  self.reward_terms(prev, data, done, completed, air_time, state.info["failed_legs"]).items()}
+        stance = self.foot_stance(data)
+        air_time = jp.where(stance, 0.0, state.info["air_time"] + self.dt)
+        stance_avg = rewards.running_stance(state.info["stance_avg"], stance, self.dt)
+        scaled = {name: self.scales[name] * value for name, value in self.reward_terms(
+            prev, data, done, completed, air_time, state.info["failed_legs"], stance_avg).items()}
         reward = sum(scaled.values())
 
         t = state.info["t"] + 1
@@ -199,6 +202,7 @@ class HexapodEnv(Env):
                                                                 state.info.get("leg_failure_p")),
                                         state.info["failed_legs"]),
                 "air_time": jp.where(over, 0.0, air_time),
+                "stance_avg": jp.where(over, 1.0, stance_avg),
                 "latency": jp.where(over, self.draw_latency(jax.random.fold_in(key, 4)), state.info["latency"])}
         # Start from the incoming metrics: wrappers (brax's evaluator) add keys of their own.
         metrics = {**state.metrics, **{f"reward/{name}": value for name, value in scaled.items()}}
@@ -312,14 +316,16 @@ class HexapodEnv(Env):
         return self.robot.contact_counts(*floor_contacts(data), data.geom_xpos[self.feet],
                                          self.config.lift_clearance)
 
-    def reward_terms(self, prev: mjx.Data, data: mjx.Data, done, completed, air_time=0.0, failed_legs=0.0) -> dict:
+    def reward_terms(self, prev: mjx.Data, data: mjx.Data, done, completed, air_time=0.0, failed_legs=0.0,
+                     stance_avg=1.0) -> dict:
         """Unscaled values of the active reward terms for the transition prev -> data, with each
-        foot's time off the floor (s) and the failed legs (0/1) after it."""
+        foot's time off the floor (s), the failed legs (0/1) and each foot's running share of time
+        on the floor after it."""
         bad, non_foot = self.contact_counts(data)
         power = servo_power(data.actuator_force, data.qvel, self.robot.actuator_dof)
         return rewards.terms(self._active_terms(), self.config, prev.qpos, data.qpos, data.qvel, self.goal(data),
                              bad, non_foot, done, completed, power, ground=self.robot.ground(data.qpos[:2]),
-                             air_time=air_time, working=1.0 - failed_legs)
+                             air_time=air_time, working=1.0 - failed_legs, stance_avg=stance_avg)
 
     # -- what a task defines ----------------------------------------------------
 

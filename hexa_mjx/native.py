@@ -53,6 +53,7 @@ class NativeEnv:
         self.success = False
         self.failed_legs = np.zeros(len(self.robot.legs))
         self.air_time = np.zeros(len(self.robot.legs))  # s since each foot last touched the floor
+        self.stance_avg = np.ones(len(self.robot.legs))  # running share of time on the floor
         self.noise = config.obs_noise * noise_scale(self.observe_as, self.mj_model.nu)  # per observed value
 
     @property
@@ -105,7 +106,7 @@ class NativeEnv:
         self.t = self.goals = 0
         self.success = False
         self.failed_legs = self._draw_failure()
-        self.air_time = np.zeros(len(self.robot.legs))
+        self.air_time, self.stance_avg = np.zeros(len(self.robot.legs)), np.ones(len(self.robot.legs))
         self.latency = self.rng.uniform(0, self.config.action_latency)  # control steps
         self.set_goal(self._first_goal())
         mujoco.mj_forward(self.mj_model, data)
@@ -158,11 +159,13 @@ class NativeEnv:
         completed = self._goal_completed(reached)
         bad, non_foot = self.contact_counts()
         c = data.contact
-        self.air_time = np.where(self.robot.foot_stance(c.geom1, c.geom2, c.dist), 0.0, self.air_time + self.dt)
+        stance = self.robot.foot_stance(c.geom1, c.geom2, c.dist)
+        self.air_time = np.where(stance, 0.0, self.air_time + self.dt)
+        self.stance_avg = rewards.running_stance(self.stance_avg, stance, self.dt)
         power = servo_power(data.actuator_force, data.qvel, self.robot.actuator_dof)
         terms = rewards.terms(self.active, self.config, prev_qpos, data.qpos, data.qvel, goal, bad, non_foot,
                               np.bool_(done), np.bool_(completed), power, ground=self.robot.ground(data.qpos[:2]),
-                              air_time=self.air_time, working=1.0 - self.failed_legs)
+                              air_time=self.air_time, working=1.0 - self.failed_legs, stance_avg=self.stance_avg)
         reward = float(sum(self.scales[name] * value for name, value in terms.items()))
         self.t += 1
         if completed:

@@ -71,6 +71,23 @@ def idle_feet(air_time, working):
     return (working * (air_time > IDLE_AIR_TIME)).sum()
 
 
+MIN_DUTY = 0.2  # share of the time each working foot should be on the floor (tripod gaits: about 0.3)
+DUTY_WINDOW = 1.0  # s, time constant of the running average of each foot's stance
+
+
+def running_stance(avg, stance, dt):
+    """Each foot's share of time on the floor, `avg` updated with this step's `stance` (0/1): an
+    exponential average with time constant DUTY_WINDOW, s; `dt` is the control period, s."""
+    return avg + (stance - avg) * (dt / DUTY_WINDOW)
+
+
+def low_duty(stance_avg, working):
+    """Shortfall of each working foot's running share of time on the floor (`stance_avg`, averaged
+    over DUTY_WINDOW) below MIN_DUTY, as a fraction of it, summed: 1 per leg that carries no load.
+    Unlike idle_feet, a foot that only taps the floor now and then still counts."""
+    return (working * (MIN_DUTY - stance_avg).clip(0.0, None) / MIN_DUTY).sum()
+
+
 def termination(flipped):
     """1 on the step the episode ends by a fall (or a non-finite physics state)."""
     return flipped.astype("float32")
@@ -89,15 +106,15 @@ def forward_velocity(vel_xy):
 TERMS = {
     f.__name__: f
     for f in (goal_approach, goal_reached, velocity_alignment, goal_bonus, stability, height, energy, mechanical_power,
-              contact_quality, body_contact, idle_feet, termination, forward_progress, forward_velocity)
+              contact_quality, body_contact, idle_feet, low_duty, termination, forward_progress, forward_velocity)
 }
 
 def terms(names, config, prev_qpos, qpos, qvel, goal_xy, bad_contacts, non_foot_contacts, done, completed,
-          power, ground=0.0, air_time=0.0, working=1.0) -> dict:
+          power, ground=0.0, air_time=0.0, working=1.0, stance_avg=1.0) -> dict:
     """Unscaled values of the terms `names` for the transition prev_qpos -> (qpos, qvel), with
     `goal_xy` the step's goal, contact counts and servo power (W) of the new state, `ground` the
-    terrain's height (m) under the torso, each foot's `air_time` (s) and whether its leg is
-    `working` (0/1), and `config` an EnvConfig.
+    terrain's height (m) under the torso, each foot's `air_time` (s), running share of time on the
+    floor `stance_avg` and whether its leg is `working` (0/1), and `config` an EnvConfig.
     Either engine's arrays; under jit, XLA drops the inputs no named term uses."""
     xp = namespace(qpos)
     xy, prev_xy, vel_xy = qpos[:2], prev_qpos[:2], qvel[:2]
@@ -118,6 +135,7 @@ def terms(names, config, prev_qpos, qpos, qvel, goal_xy, bad_contacts, non_foot_
         "contact_quality": (bad_contacts,),
         "body_contact": (non_foot_contacts,),
         "idle_feet": (air_time, working),
+        "low_duty": (stance_avg, working),
         "termination": (done,),
         "forward_progress": (prev_xy, xy),
         "forward_velocity": (vel_xy,),
@@ -133,6 +151,7 @@ _SHAPING = {
     "contact_quality": -0.5,
     "body_contact": -1.0,
     "idle_feet": 0.0,  # off unless asked for (--reward_scale idle_feet=-5): a stance for every working leg
+    "low_duty": 0.0,  # off unless asked for (--reward_scale low_duty=-5): load on every working leg
     "termination": -200.0,  # the report's code: -200 for a flip
 }
 

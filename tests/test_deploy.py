@@ -103,7 +103,8 @@ def test_native_rewards_match_mjx_from_the_same_state(env, step, state0):
 
 
 def test_native_air_time_matches_mjx(env, step, state0):
-    """Both engines count each foot's time off the floor the same way (the idle_feet term's input)."""
+    """Both engines count each foot's time off the floor and its share of time down the same way
+    (the inputs of the idle_feet and low_duty terms)."""
     data = state0.pipeline_state
     lifted = state0.replace(pipeline_state=data.replace(qpos=data.qpos.at[2].add(0.3)))
     native = NativeEnv(env.config)
@@ -114,6 +115,7 @@ def test_native_air_time_matches_mjx(env, step, state0):
         state = step(state, jp.zeros(env.action_size))
         native.step(np.zeros(env.action_size))
     np.testing.assert_allclose(native.air_time, np.asarray(state.info["air_time"]), rtol=1e-5)
+    np.testing.assert_allclose(native.stance_avg, np.asarray(state.info["stance_avg"]), rtol=1e-5)
     assert native.air_time.min() > 0
 
 

@@ -72,6 +72,7 @@ def test_air_time_counts_while_the_feet_are_off_the_floor(env, step, state0):
     for _ in range(5):
         state = step(state, jp.zeros(env.action_size))
     np.testing.assert_allclose(state.info["air_time"], np.full(6, 5 * env.dt), rtol=1e-5)
+    np.testing.assert_allclose(state.info["stance_avg"], np.full(6, (1 - env.dt / rewards.DUTY_WINDOW) ** 5), rtol=1e-5)
     assert not bool(env.foot_stance(state.pipeline_state).any())
     last = state.replace(info={**state.info, "t": jp.int32(env.config.episode_length - 1)})
     assert float(step(last, jp.zeros(env.action_size)).info["air_time"].sum()) == 0.0  # a new episode starts down

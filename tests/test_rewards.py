@@ -53,6 +53,21 @@ def test_idle_feet_counts_working_feet_up_longer_than_the_limit():
     failed_leg_4 = jp.asarray([1.0, 1.0, 1.0, 0.0, 1.0, 1.0])  # a limp leg's foot is not the policy's
     assert float(rewards.idle_feet(air, failed_leg_4)) == 2.0
     assert rewards.make_scales("navigate")["idle_feet"] == 0.0  # off unless asked for
+    assert rewards.make_scales("navigate")["low_duty"] == 0.0
+
+
+def test_low_duty_is_each_working_feet_shortfall_below_the_minimum_share():
+    share = jp.asarray([0.0, rewards.MIN_DUTY / 2, rewards.MIN_DUTY, 0.5, 0.0, 1.0])
+    assert float(rewards.low_duty(share, jp.ones(6))) == pytest.approx(1.0 + 0.5 + 0 + 0 + 1.0 + 0)
+    assert float(rewards.low_duty(share, jp.asarray([1.0, 1.0, 1.0, 1.0, 0.0, 1.0]))) == pytest.approx(1.5)
+
+
+def test_running_stance_settles_at_the_share_of_time_down():
+    dt, avg = 1 / 60, jp.ones(2)
+    for t in range(60 * 20):  # 20 s of a foot down one step in four, and one never down
+        avg = rewards.running_stance(avg, jp.asarray([t % 4 == 0, False]), dt)
+    assert float(avg[0]) == pytest.approx(0.25, abs=0.02)
+    assert float(avg[1]) < 1e-6  # e^-20
     assert rewards.make_scales("navigate", overrides={"idle_feet": -5})["idle_feet"] == -5.0
 
 
