@@ -302,9 +302,7 @@ class HexapodEnv(Env):
 
     def floor_contact_geoms(self, data: mjx.Data):
         """(active robot-floor contact mask, the robot geom of each contact) over MJX's contact slots."""
-        geom1, geom2, dist = floor_contacts(data)
-        floor = self.robot.floor
-        return (dist < 0) & ((geom1 == floor) | (geom2 == floor)), jp.where(geom1 == floor, geom2, geom1)
+        return self.robot.floor_contact_geoms(*floor_contacts(data))
 
     def foot_stance(self, data: mjx.Data) -> jax.Array:
         """Whether each foot touches the floor, (legs,) bool."""

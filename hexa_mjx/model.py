@@ -114,11 +114,17 @@ class RobotModel:
         """Ground height (m) under the points `xy` (..., 2): 0 on the flat floor."""
         return terrains.ground_height(self.terrain, xy)
 
+    def floor_contact_geoms(self, geom1, geom2, dist):
+        """(active robot-floor contact mask, the robot geom of each contact) from contact arrays of
+        either engine."""
+        xp = namespace(dist)
+        on_floor = (dist < 0) & ((geom1 == self.floor) | (geom2 == self.floor))
+        return on_floor, xp.where(geom1 == self.floor, geom2, geom1)
+
     def foot_stance(self, geom1, geom2, dist):
         """Whether each foot touches the floor, (legs,) bool, from contact arrays of either engine."""
         xp = namespace(dist)
-        on_floor = (dist < 0) & ((geom1 == self.floor) | (geom2 == self.floor))
-        other = xp.where(geom1 == self.floor, geom2, geom1)
+        on_floor, other = self.floor_contact_geoms(geom1, geom2, dist)
         return (on_floor[None] & (other[None] == xp.asarray(self.feet)[:, None])).any(1)
 
     def contact_counts(self, geom1, geom2, dist, foot_pos, lift_clearance: float):
@@ -126,8 +132,7 @@ class RobotModel:
         ground under it, contacts of any non-foot geom) among contacts with the floor, from contact
         arrays of either engine; `foot_pos` (feet, 3) are the foot spheres' centres."""
         xp = namespace(dist)
-        on_floor = (dist < 0) & ((geom1 == self.floor) | (geom2 == self.floor))
-        other = xp.where(geom1 == self.floor, geom2, geom1)
+        on_floor, other = self.floor_contact_geoms(geom1, geom2, dist)
         leg = xp.asarray(self.geom_leg)[other]
         clearance = foot_pos[:, 2] - xp.asarray(self.foot_radius) - self.ground(foot_pos[:, :2])
         lifted = clearance[xp.maximum(leg, 0)] > lift_clearance

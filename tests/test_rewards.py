@@ -54,6 +54,7 @@ def test_idle_feet_counts_working_feet_up_longer_than_the_limit():
     assert float(rewards.idle_feet(air, failed_leg_4)) == 2.0
     assert rewards.make_scales("navigate")["idle_feet"] == 0.0  # off unless asked for
     assert rewards.make_scales("navigate")["low_duty"] == 0.0
+    assert rewards.make_scales("navigate", overrides={"idle_feet": -5})["idle_feet"] == -5.0
 
 
 def test_low_duty_is_each_working_feet_shortfall_below_the_minimum_share():
@@ -68,7 +69,6 @@ def test_running_stance_settles_at_the_share_of_time_down():
         avg = rewards.running_stance(avg, jp.asarray([t % 4 == 0, False]), dt)
     assert float(avg[0]) == pytest.approx(0.25, abs=0.02)
     assert float(avg[1]) < 1e-6  # e^-20
-    assert rewards.make_scales("navigate", overrides={"idle_feet": -5})["idle_feet"] == -5.0
 
 
 def test_forward_motion_terms():
