@@ -144,16 +144,14 @@ def solver_error(env, steps: int) -> tuple[float, float]:
 def train_speed(num_envs: int = 256, updates: int = 4, devices: int = 1, **overrides) -> dict:
     """End-to-end PPO env steps/s (train.py's settings, no evaluations) and compile time on `devices`.
     Three training epochs of `updates` updates: the first compiles, the last is timed."""
-    from brax.training.agents.ppo import train as ppo
-
-    from hexa_mjx import training
+    from hexa_mjx import ppo, training
 
     cfg = config.TrainConfig(num_envs=num_envs, **overrides)
     env = config.make_env_for(cfg)
     marks = [(0, time.perf_counter())]
-    ppo.train(environment=env, num_timesteps=3 * updates * cfg.steps_per_update, **training.ppo_settings(cfg),
-              num_evals=4, run_evals=False, max_devices_per_host=devices,
-              progress_fn=lambda step, m: marks.append((step, time.perf_counter())))
+    ppo.train(env, num_timesteps=3 * updates * cfg.steps_per_update, num_evals=4, seed=cfg.seed,
+              **training.ppo_settings(cfg), max_devices_per_host=devices, wrap_env_fn=training.wrap_env_fn(env),
+              on_interval=lambda step, *_: marks.append((step, time.perf_counter())) if step else None)
     (s1, t1), (s2, t2) = marks[-2:]
     epoch_s = t2 - t1
     return {"train_steps_per_s": (s2 - s1) / epoch_s, "compile_s": (marks[-3][1] - marks[0][1]) - epoch_s,

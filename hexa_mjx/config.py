@@ -128,8 +128,7 @@ class TrainConfig:
         "help": "keep compiled programs in a per-user cache folder (--no_compile_cache: off)"})
     record_optimizer: bool = dataclasses.field(default=True, metadata={
         "help": "save Adam's state in each checkpoint, so a resume continues it (--no_record_optimizer: Adam "
-                "starts afresh on resume, and with --no_progress the compile cache can keep the training program: "
-                "JAX caches no program that calls back to the host)"})
+                "starts afresh on resume)"})
     eval_at_start: bool = dataclasses.field(default=True, metadata={
         "help": "evaluate the untrained params before the first update, as brax does (--no_eval_at_start: skip "
                 "it; it runs about 30 s on a 2-core CPU)"})

@@ -22,14 +22,10 @@ environment's `info`, where `HexapodEnv.step` reads them for the next episode's 
 
 from __future__ import annotations
 
-import collections
-
 import jax
 import jax.numpy as jp
 import numpy as np
 from brax.envs.base import State, Wrapper
-
-from hexa_mjx.curriculum import TAP_EVERY  # the same host snapshot spacing as the curriculum's levels
 
 FLOOR = 0.05  # smallest deficit a leg is weighed by
 UNIFORM_SHARE = 0.5  # of the failures, drawn uniformly over the legs whatever their deficits
@@ -56,12 +52,11 @@ def episode_stats(failed_legs: jax.Array, goals: jax.Array, ended: jax.Array) ->
 
 class LegFailureSchedule(Wrapper):
     """Training environments' leg failures: none before `start_after` control steps per environment,
-    then at the configured rate, the leg drawn by `leg_probabilities` when `adaptive`. With a `record`
-    callback, sends the batch's statistics and probabilities to the host every TAP_EVERY steps."""
+    then at the configured rate, the leg drawn by `leg_probabilities` when `adaptive`."""
 
-    def __init__(self, env, start_after: int = 0, adaptive: bool = False, record=None, every: int = TAP_EVERY):
+    def __init__(self, env, start_after: int = 0, adaptive: bool = False):
         super().__init__(env)
-        self.start_after, self.adaptive, self.record, self.every = start_after, adaptive, record, every
+        self.start_after, self.adaptive = start_after, adaptive
         config = env.unwrapped.config
         self.rate = config.leg_failure_rate
         legs = len(env.unwrapped.robot.legs)
@@ -94,31 +89,17 @@ class LegFailureSchedule(Wrapper):
         state.info.update(failure_clock=clock, leg_failure_rate=jp.full(batch, rate, jp.float32),
                           leg_failure_p=jp.broadcast_to(p, batch + p.shape),
                           leg_failure_stats=jp.broadcast_to(stats, batch + stats.shape))
-        if self.record is not None:
-            jax.lax.cond(clock[0] % self.every == 0, lambda s: jax.debug.callback(self.record, *s), lambda s: None,
-                         (stats, p, rate))
         return state
 
 
-class LegFailureRecord:
-    """Host side of `LegFailureSchedule`: the latest snapshot of each device's batch."""
-
-    def __init__(self, devices: int):
-        self._latest = collections.deque(maxlen=devices)
-
-    def __call__(self, stats, p, rate) -> None:
-        self._latest.append((stats, p, rate))  # references only: no device waits on the host
-
-    def summary(self) -> dict:
-        """{"leg_failure/rate", "leg_failure/p_leg<k>", "leg_failure/goals_intact", "leg_failure/goals_leg<k>"}
-        over the latest snapshots ({} before the first): goals per finished training episode."""
-        jax.effects_barrier()
-        if not self._latest:
-            return {}
-        stats = np.sum([np.asarray(s) for s, _, _ in self._latest], axis=0)
-        p = np.mean([np.asarray(q) for _, q, _ in self._latest], axis=0)
-        goals = stats[:, 0] / np.maximum(stats[:, 1], 1e-9)
-        return {"leg_failure/rate": float(np.mean([np.asarray(r) for _, _, r in self._latest])),
-                "leg_failure/goals_intact": float(goals[0]),
-                **{f"leg_failure/goals_leg{k}": float(g) for k, g in enumerate(goals[1:], start=1)},
-                **{f"leg_failure/p_leg{k}": float(q) for k, q in enumerate(p, start=1)}}
+def schedule_summary(info) -> dict:
+    """{"leg_failure/rate", "leg_failure/p_leg<k>", "leg_failure/goals_intact", "leg_failure/goals_leg<k>"}
+    from the training environments' `info`, laid out (devices, environments per device, ...): the
+    current rate and leg probabilities, and goals per finished episode in each condition."""
+    stats = np.asarray(info["leg_failure_stats"])[:, 0].sum(0)  # each device's batch, summed
+    p = np.asarray(info["leg_failure_p"])[:, 0].mean(0)
+    goals = stats[:, 0] / np.maximum(stats[:, 1], 1e-9)
+    return {"leg_failure/rate": float(np.asarray(info["leg_failure_rate"])[:, 0].mean()),
+            "leg_failure/goals_intact": float(goals[0]),
+            **{f"leg_failure/goals_leg{k}": float(g) for k, g in enumerate(goals[1:], start=1)},
+            **{f"leg_failure/p_leg{k}": float(q) for k, q in enumerate(p, start=1)}}

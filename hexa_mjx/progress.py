@@ -4,10 +4,9 @@ from __future__ import annotations
 
 import json
 import math
-import threading
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
 if TYPE_CHECKING:
     from hexa_mjx.config import TrainConfig
@@ -68,7 +67,6 @@ class Logger:
         self.last_line_t, self.last_line_step = self.t0, start_step
         self.first_update_s = None
         self.evaluation_t0, self.evaluation_ran = None, False  # when the first evaluation started; whether it ran
-        self.lock = threading.Lock()  # each device's tap calls progress() from its own thread
 
     def compiling(self, evaluation_first: bool = True) -> None:
         """Say that the programs are being compiled (or loaded from cache): the evaluation's first
@@ -80,30 +78,28 @@ class Logger:
 
     def evaluating(self) -> None:
         """An evaluation starts: the first one compiles its program."""
-        with self.lock:
-            if self.evaluation_t0 is None and not self.evaluation_ran:
-                self.evaluation_t0 = self.phase_t0 if self.phase == "evaluation" else time.time()
+        if self.evaluation_t0 is None and not self.evaluation_ran:
+            self.evaluation_t0 = self.phase_t0 if self.phase == "evaluation" else time.time()
 
-    def progress(self, step: int, episode_return: float) -> None:
-        """A report from the training environments (`wrappers.ProgressTap`, once per rollout): the
-        run's env steps and the mean return of their latest finished episodes. Prints a line at most
-        every `interval_s`, and says when the training program has compiled and started."""
-        with self.lock:
-            now = time.time()
-            if self.phase == "training":
-                self.first_update_s = now - self.phase_t0
-                print(f"training compiled and its first rollout ran in {self.first_update_s:.0f} s "
-                      f"({now - self.t0:.0f} s since the start)", flush=True)
-                self.phase = ""
-                self.last_line_t, self.last_line_step = now, step
-                return
-            if now - self.last_line_t < self.interval_s or step <= self.last_line_step:
-                return
-            rate = (step - self.last_line_step) / (now - self.last_line_t)
-            left = max(self.cfg.num_timesteps - step, 0) / rate if rate > 0 else math.nan
-            print(f"  step {step:>9,}/{self.cfg.num_timesteps:,}  {rate:7.0f} steps/s  left {fmt_time(left)}  "
-                  f"training episodes' return {episode_return:8.1f}", flush=True)
+    def progress(self, step: int, episode_return: Callable[[], float]) -> None:
+        """An update has run (`hexa_mjx.ppo`): the run is at `step` env steps, and `episode_return()`
+        reads the mean of the training environments' latest finished returns. Prints a line at most
+        every `interval_s`, and says when the training program has compiled and run once."""
+        now = time.time()
+        if self.phase == "training":
+            self.first_update_s = now - self.phase_t0
+            print(f"training compiled and its first update ran in {self.first_update_s:.0f} s "
+                  f"({now - self.t0:.0f} s since the start)", flush=True)
+            self.phase = ""
             self.last_line_t, self.last_line_step = now, step
+            return
+        if now - self.last_line_t < self.interval_s or step <= self.last_line_step:
+            return
+        rate = (step - self.last_line_step) / (now - self.last_line_t)
+        left = max(self.cfg.num_timesteps - step, 0) / rate if rate > 0 else math.nan
+        print(f"  step {step:>9,}/{self.cfg.num_timesteps:,}  {rate:7.0f} steps/s  left {fmt_time(left)}  "
+              f"training episodes' return {episode_return():8.1f}", flush=True)
+        self.last_line_t, self.last_line_step = now, step
 
     def __call__(self, step: int, metrics: dict) -> None:
         elapsed = time.time() - self.t0
@@ -134,15 +130,14 @@ class Logger:
         """An evaluation has run and its row is written; the first one says that the evaluation
         program is ready (and, before training, that the training one is compiling)."""
         now = time.time()
-        with self.lock:
-            if self.evaluation_t0 is not None:
-                before_training = self.phase == "evaluation"
-                print(f"evaluation compiled and run in {now - self.evaluation_t0:.0f} s"
-                      + ("; compiling the training programs ..." if before_training else ""), flush=True)
-                self.evaluation_t0, self.evaluation_ran = None, True
-                if before_training:
-                    self.phase, self.phase_t0 = "training", now
-            self.last_line_t, self.last_line_step = now, step
+        if self.evaluation_t0 is not None:
+            before_training = self.phase == "evaluation"
+            print(f"evaluation compiled and run in {now - self.evaluation_t0:.0f} s"
+                  + ("; compiling the training programs ..." if before_training else ""), flush=True)
+            self.evaluation_t0, self.evaluation_ran = None, True
+            if before_training:
+                self.phase, self.phase_t0 = "training", now
+        self.last_line_t, self.last_line_step = now, step
 
     def close(self):
         self.tb.close()

@@ -9,6 +9,13 @@ A run stops (SIGTERM, which train.py treats as Ctrl-C) at its first evaluation w
 wall time and env steps to that evaluation, the time to the first training update (compile),
 and a median-and-range summary. The time to the first update is read from train.py's
 "training compiled" line (absent with --no_progress). Everything is also written to `<out>/time_to_success.json`.
+
+`--verify 128` checks each run with eval.py afterwards (128 episodes, the run's own starts): the
+checkpoints from its first training evaluation at the target on, until one reaches the target in
+eval.py too (the time to success that counts), and, with `--full`, the final checkpoint against
+the report task's targets (median final distance, falls, body contact). A run stopped at its
+first success leaves no checkpoint of that step (it is stopped as the row is written), so
+`--verify` needs `--full`.
 """
 
 from __future__ import annotations
@@ -90,6 +97,53 @@ def run_one(flags: list[str], run_dir: Path, target: float, full: bool, timeout_
             "last": rows[-1] if rows else None, "log_tail": "".join(out[-5:])}
 
 
+def evaluate_checkpoint(checkpoint: Path, episodes: int) -> dict:
+    """eval.py's summary of one checkpoint (no video), with the seconds eval.py took."""
+    out = checkpoint.parent.parent / "verify" / checkpoint.name
+    t0 = time.time()
+    proc = subprocess.run([sys.executable, str(ROOT / "eval.py"), "--ckpt", str(checkpoint), "--episodes",
+                           str(episodes), "--no-video", "--out", str(out)], cwd=ROOT, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise RuntimeError(f"eval.py failed on {checkpoint}:\n{proc.stdout[-2000:]}\n{proc.stderr[-2000:]}")
+    summary = json.loads((out / "metrics.json").read_text())["summary"]
+    return {"step": int(checkpoint.name), "eval_s": round(time.time() - t0, 1),
+            "success_rate": summary["success_rate"], "final_distance_median": summary["final_distance_median"],
+            "fall_rate": summary["fall_rate"], "feet_only_steps": summary.get("feet_only_steps"),
+            "body_contact": summary["reward_terms"].get("body_contact")}
+
+
+def verify_run(run_dir: Path, target: float, episodes: int) -> dict:
+    """eval.py on the run's checkpoints from its first training evaluation at `target` on, until one
+    reaches `target`; and on its last checkpoint. Wall times are the training rows' (train.py's
+    clock, the same as the study's)."""
+    rows = [json.loads(x) for x in (run_dir / "metrics.jsonl").read_text().splitlines() if x.strip()]
+    wall = {row["step"]: row["walltime_s"] for row in rows}
+    saved = {int(p.name): p for p in (run_dir / "checkpoints").iterdir() if p.name.isdigit()}
+    hit = first_row_at(rows, target)
+    checked, verified = [], None
+    for step in sorted(s for s in saved if hit and s >= hit[0]):
+        checked.append(evaluate_checkpoint(saved[step], episodes))
+        if checked[-1]["success_rate"] >= target:
+            verified = step
+            break
+    final = next((c for c in checked if c["step"] == max(saved)), None) if saved else None
+    if saved and final is None:
+        final = evaluate_checkpoint(saved[max(saved)], episodes)
+    return {"checked": checked, "verified_step": verified, "verified_wall_s": wall.get(verified),
+            "final": final}
+
+
+def verify_line(name: str, seed, v: dict, target: float) -> str:
+    got = (f"{v['verified_wall_s'] / 60:.1f} min ({v['verified_step']:,} steps)" if v["verified_step"] is not None
+           else "not reached")
+    f = v["final"]
+    final = (f"final ({f['step']:,} steps): success {f['success_rate']:.1%}, median distance "
+             f"{f['final_distance_median']:.2f} m, falls {f['fall_rate']:.1%}, feet-only steps "
+             f"{f['feet_only_steps']:.1%}, body contact {f['body_contact']:.1f}/episode" if f else "no checkpoint")
+    return (f"{name} seed {seed}: eval.py success >= {target:.0%} at {got}; {final}; "
+            f"eval.py took {', '.join(str(c['eval_s']) for c in v['checked'])} s")
+
+
 def summary_line(name: str, results: list[dict]) -> str:
     times = [r["success_wall_s"] for r in results if r["success_wall_s"] is not None]
     steps = [r["success_step"] for r in results if r["success_step"] is not None]
@@ -100,8 +154,20 @@ def summary_line(name: str, results: list[dict]) -> str:
             f"time to the first update {fmt(compiles, lambda x: f'{x:.0f} s')}")
 
 
-def report_runs(run_dirs: list[Path], target: float) -> int:
-    """Print each finished run's first evaluation at or above `target` and its whole run."""
+def verified_summary_line(name: str, results: list[dict]) -> str:
+    times = [r["verify"]["verified_wall_s"] for r in results if r["verify"]["verified_wall_s"] is not None]
+    finals = [r["verify"]["final"] for r in results if r["verify"]["final"]]
+    med = lambda key: statistics.median(f[key] for f in finals)  # noqa: E731
+    return (f"{'':<12} eval.py: reached {len(times)}/{len(results)}  wall time, median [range] "
+            + (f"{statistics.median(times) / 60:.1f} min [{min(times) / 60:.1f}, {max(times) / 60:.1f}]" if times else "-")
+            + (f"  final policies, median: success {med('success_rate'):.1%}, distance "
+               f"{med('final_distance_median'):.2f} m, falls {med('fall_rate'):.1%} (worst "
+               f"{max(f['fall_rate'] for f in finals):.1%})" if finals else ""))
+
+
+def report_runs(run_dirs: list[Path], target: float, verify: int = 0) -> int:
+    """Print each finished run's first evaluation at or above `target` and its whole run (and, with
+    `verify` episodes, eval.py's check of its checkpoints)."""
     for run_dir in run_dirs:
         metrics = run_dir / "metrics.jsonl"
         if not metrics.is_file():
@@ -113,6 +179,8 @@ def report_runs(run_dirs: list[Path], target: float) -> int:
         print(f"{run_dir}: success >= {target:.1%} at {got}; run {rows[-1]['step']:,} steps in "
               f"{rows[-1]['walltime_s'] / 60:.1f} min; last evaluation success {rows[-1]['success_rate']:.0%}, "
               f"falls {rows[-1]['fall_rate']:.0%}")
+        if verify:
+            print(verify_line(run_dir.name, "-", verify_run(run_dir, target, verify), target), flush=True)
     return 0
 
 
@@ -128,11 +196,17 @@ def main(argv=None) -> int:
     parser.add_argument("--full", action="store_true", help="let every run finish its budget")
     parser.add_argument("--timeout_min", type=float, default=60.0, help="stop a run after this long (default: 60)")
     parser.add_argument("--out", default="runs/time_to_success", help="folder for the runs and the JSON")
+    parser.add_argument("--verify", type=int, default=0, metavar="EPISODES",
+                        help="after training, check the runs with eval.py over this many episodes (needs --full)")
     parser.add_argument("--runs", nargs="+", type=Path, default=None,
                         help="instead of training: read these finished run directories and print the same figures")
     args = parser.parse_args(argv)
+    if args.verify < 0:
+        parser.error("--verify takes a number of episodes, 0 (off) or more")
     if args.runs:
-        return report_runs(args.runs, args.target)
+        return report_runs(args.runs, args.target, args.verify)
+    if args.verify and not args.full:
+        parser.error("--verify needs --full: a run stopped at its first success has no checkpoint of that step")
     configs = [parse_config(c) for c in args.configs]
     out = Path(args.out)
     if out.exists() and any(out.iterdir()):
@@ -152,9 +226,18 @@ def main(argv=None) -> int:
                   f"{r['first_update_s']} s; step-0 to last evaluation {r['trained_s']} s; "
                   f"run {r['wall_s'] / 60:.1f} min", flush=True)
     (out / "time_to_success.json").write_text(json.dumps(results, indent=1))
+    if args.verify:
+        print(f"\nverifying with eval.py, {args.verify} episodes per checkpoint")
+        for name, _ in configs:
+            for r in results[name]:
+                r["verify"] = verify_run(out / f"{name}-s{r['seed']}", args.target, args.verify)
+                print(verify_line(name, r["seed"], r["verify"], args.target), flush=True)
+        (out / "time_to_success.json").write_text(json.dumps(results, indent=1))
     print("\nside by side, seeds " + " ".join(map(str, args.seeds)))
     for name, _ in configs:
         print(summary_line(name, results[name]))
+        if args.verify:
+            print(verified_summary_line(name, results[name]))
     return 0
 
 

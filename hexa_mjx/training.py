@@ -18,16 +18,17 @@ import jax
 import jax.numpy as jp
 from flax import linen
 
-from hexa_mjx import distributed, faults, randomization
+from hexa_mjx import distributed, faults, ppo, randomization
 from hexa_mjx.checkpoints import (checkpoint_dir, list_checkpoints, load_checkpoint, load_latest, remove_temporaries,
                                   save_checkpoint)
 from hexa_mjx.config import TrainConfig, init_checkpoint, make_env_for, validate
-from hexa_mjx.curriculum import LevelHistogram
-from hexa_mjx.failure_schedule import LegFailureRecord
+from hexa_mjx.curriculum import level_summary
+from hexa_mjx.failure_schedule import schedule_summary
 from hexa_mjx.jax_setup import devices_for, prepare_jax
-from hexa_mjx.optimizer_state import AdamRecorder, adam_template, recording
+from hexa_mjx.optimizer_state import adam_template
 from hexa_mjx.progress import Logger, keep_rows_up_to
 from hexa_mjx.run_evaluator import RunEvaluator
+from hexa_mjx.wrappers import mean_last_return
 
 
 def network_factory(cfg: TrainConfig):
@@ -71,7 +72,8 @@ def make_inference(cfg: TrainConfig, env, params, deterministic=True):
 
 
 def ppo_settings(cfg: TrainConfig) -> dict:
-    """brax ppo.train's keyword arguments for the algorithm and rollout shape of `cfg`."""
+    """The algorithm and rollout shape of `cfg` as keyword arguments of `hexa_mjx.ppo.train` (and of
+    brax's `ppo.train`, which takes the same)."""
     return dict(num_envs=cfg.num_envs, episode_length=cfg.episode_length, learning_rate=cfg.lr,
                 entropy_cost=cfg.ent_coef, discounting=cfg.discount, unroll_length=cfg.unroll_length,
                 batch_size=cfg.batch_size, num_minibatches=cfg.num_minibatches,
@@ -88,28 +90,18 @@ def evals_for(cfg: TrainConfig, remaining: int) -> int:
     return 1 + max(1, math.ceil((cfg.num_evals - 1) * remaining / cfg.num_timesteps))
 
 
-def wrap_env_fn(env, randomized: bool = False, level_record=None, progress_record=None, progress_every: int = 64,
-                failure_schedule: dict | None = None):
+def wrap_env_fn(env, randomized: bool = False, track_returns: bool = False, failure_schedule: dict | None = None):
     """brax's training wrappers, or ours that redraw the start state (and first goal) every episode,
-    give each environment its own randomized model, report curriculum levels to `level_record`,
-    report the training environments' progress to `progress_record`, and schedule their leg
-    failures (`failure_schedule`, hexa_mjx.failure_schedule)."""
+    give each environment its own randomized model, keep each environment's latest return for the
+    progress line (`track_returns`), and schedule leg failures (`failure_schedule`,
+    hexa_mjx.failure_schedule)."""
     from hexa_mjx import wrappers
 
     fresh_starts = env.fresh_starts or randomized
-    if level_record is None and progress_record is None and failure_schedule is None:
+    if not track_returns and failure_schedule is None:
         return wrappers.wrap_for_training if fresh_starts else None
-    # brax wraps the training environments first, then the evaluation ones: only the first are
-    # watched and scheduled; evaluations draw failures as configured.
-    first = [True]
-
-    def wrap(env, **kwargs):
-        training = first.pop() if first else False
-        return wrappers.wrap_for_training(env, level_record=level_record,
-                                          progress_record=progress_record if training else None,
-                                          progress_every=progress_every, fresh_starts=fresh_starts,
-                                          failure_schedule=failure_schedule if training else None, **kwargs)
-    return wrap
+    return functools.partial(wrappers.wrap_for_training, track_returns=track_returns, fresh_starts=fresh_starts,
+                             failure_schedule=failure_schedule)
 
 
 def failure_schedule_for(cfg: TrainConfig, start_step: int) -> dict | None:
@@ -143,8 +135,6 @@ def resume_point(cfg: TrainConfig, run_dir: Path, template, optimizer_template) 
 def train(cfg: TrainConfig, on_eval=None) -> dict:
     """Run (or resume) PPO for `cfg`; returns the last evaluation row. `on_eval(row)` is called with
     each evaluation's metrics.jsonl row (a sweep reports them to its scheduler)."""
-    from brax.training.agents.ppo import train as ppo
-
     prepare_jax(cpu_devices=cfg.cpu_devices, compile_cache=cfg.compile_cache)
     main = distributed.is_main()  # process 0 (or the only one) reads and writes the run directory
     cfg = validate(cfg, writes=main)
@@ -172,22 +162,14 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
         restore = distributed.share(restore if main else template)
     if adam:
         optimizer = distributed.share(optimizer if main else optimizer_template)
-    # brax's Adam, recorded for each checkpoint and restored from the last (hexa_mjx.optimizer_state).
-    recorder = AdamRecorder(cfg.update_epochs * cfg.num_minibatches, restored=optimizer,
-                            record=cfg.record_optimizer)
     remaining = cfg.num_timesteps - start_step
     if remaining <= 0:
         print(f"{run_dir} already has {start_step:,} of {cfg.num_timesteps:,} steps; nothing to do")
         return {}
 
     logger = Logger(run_dir, cfg, start_step) if main else None
-    # Where the curriculum's environments are, for each evaluation row (levels restart at 0 on resume).
-    levels = LevelHistogram(cfg.curriculum_levels, devices_for(cfg)) if cfg.curriculum_levels else None
     schedule = failure_schedule_for(cfg, start_step)
-    failures = LegFailureRecord(devices_for(cfg)) if schedule else None
 
-    pending = {}  # the checkpoint brax handed over, saved once its evaluation row is written
-    evaluations = {}  # each step's evaluation metrics, run in on_params and logged in on_progress
     # A fresh run evaluates its untrained params if asked; a resumed one its checkpoint's only if
     # that row is missing (a crash between the two, or a run from before rows were written first).
     evaluate_start = start_step not in logged and (cfg.eval_at_start or start_step > 0)
@@ -195,35 +177,29 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
     evaluator = RunEvaluator(eval_env, wrap_env_fn(env, cfg.randomize), randomization_fn, cfg.num_eval_envs,
                              cfg.episode_length, seed=cfg.seed + start_step) if main else None
 
-    def on_tap(clock, return_sum, episodes):  # hexa_mjx.wrappers.ProgressTap, from each device
-        if logger is not None:
-            logger.progress(start_step + int(clock) * cfg.num_envs,
-                            float(return_sum) / int(episodes) if episodes else math.nan)
-
-    def on_progress(step, metrics):
-        if logger is None:  # brax reports on process 0 only; kept safe for other callers
+    def on_interval(step, make_policy, params, adam, env_state):  # process 0: before training, after each interval
+        if step == 0 and not evaluate_start:
             return
-        logger(start_step + step, {**metrics, **evaluations.pop(step), **(levels.summary() if levels else {}),
-                                     **(failures.summary() if failures else {})})
+        logger.evaluating()
+        metrics = evaluator(make_policy, params)
+        # Where the curriculum's environments are (levels restart at 0 on resume), and the failure schedule.
+        if cfg.curriculum_levels:
+            metrics.update(level_summary(env_state.info["level"], cfg.curriculum_levels))
+        if schedule:
+            metrics.update(schedule_summary(env_state.info))
+        logger(start_step + step, metrics)
         if step == 0:
             faults.point("training-started")
-        elif step in pending:
+        else:
             # Row first, then checkpoint: a crash between them loses neither, because a resume drops
             # the rows past its checkpoint and trains those steps again.
             faults.point("row-written")
-            save_checkpoint(run_dir, start_step + step, *pending.pop(step))
+            save_checkpoint(run_dir, start_step + step, params, adam if cfg.record_optimizer else None)
         if on_eval:  # a sweep's scheduler may stop the run here: its checkpoint is saved
             on_eval(logger.last)
 
-    def on_params(step, make_policy, params):  # brax: before each on_progress, and once before training
-        if not main or (step == 0 and not evaluate_start):
-            return
-        if step > 0:
-            pending[step] = (params, recorder.latest)
-        logger.evaluating()
-        evaluations[step] = evaluator(make_policy, params)
-        if step == 0:  # brax calls on_progress after training epochs only
-            on_progress(0, {})
+    def on_update(step, env_state):
+        logger.progress(start_step + step, lambda: mean_last_return(env_state))
 
     t0 = time.time()
     devices = devices_for(cfg)
@@ -233,15 +209,12 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
           f"{cfg.steps_per_update:,} steps per update -> {run_dir}", flush=True)
     if logger:
         logger.compiling(evaluation_first=evaluate_start)
-    with recording(recorder):
-        ppo.train(environment=env, eval_env=eval_env, num_timesteps=remaining, **ppo_settings(cfg),
-                  seed=cfg.seed + start_step, max_devices_per_host=devices,
-                  wrap_env_fn=wrap_env_fn(env, cfg.randomize, levels, on_tap if cfg.progress else None,
-                                          progress_every=cfg.steps_per_update // cfg.num_envs,
-                                          failure_schedule=schedule and {**schedule, "record": failures}),
-                  randomization_fn=randomization_fn,
-                  num_evals=evals_for(cfg, remaining), num_eval_envs=cfg.num_eval_envs, run_evals=False,
-                  progress_fn=on_progress, policy_params_fn=on_params, restore_params=restore)
+    ppo.train(env, num_timesteps=remaining, num_evals=evals_for(cfg, remaining), seed=cfg.seed + start_step,
+              **ppo_settings(cfg), max_devices_per_host=devices,
+              wrap_env_fn=wrap_env_fn(env, cfg.randomize, track_returns=cfg.progress, failure_schedule=schedule),
+              randomization_fn=randomization_fn, restore_params=restore, restore_adam=optimizer,
+              on_interval=on_interval if main else None,
+              on_update=on_update if main and cfg.progress else None)
     total = time.time() - t0
     if logger is None:
         print(f"process {jax.process_index()} done: {remaining:,} steps in {total / 60:.1f} min")

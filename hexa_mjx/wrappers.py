@@ -5,17 +5,19 @@ brax's AutoResetWrapper restarts a finished environment from the state of its fi
 start-state noise would be drawn once per environment, not once per episode. `FreshStartAutoReset`
 draws it again at every episode boundary (`HexapodEnv.restart`), from a key kept per environment.
 `RandomizedVmap` replaces brax's VmapWrapper when a `randomization_fn` gives one model per
-environment (`hexa_mjx.randomization`). `ProgressTap` tells the host how far training has got.
+environment (`hexa_mjx.randomization`). `LastReturn` keeps the returns the progress line reports.
 """
 
 from __future__ import annotations
 
+import math
+
 import jax
 import jax.numpy as jp
+import numpy as np
 from brax.envs.base import State, Wrapper
 from brax.envs.wrappers import training as brax_training
 
-from hexa_mjx.curriculum import LevelTap
 from hexa_mjx.failure_schedule import LegFailureSchedule
 
 
@@ -74,49 +76,39 @@ class RandomizedVmap(Wrapper):
             self._models, state, action)
 
 
-class ProgressTap(Wrapper):
-    """Every `every` steps, calls `record(steps, return_sum, episodes)` on the host: the steps each
-    environment has taken, and the sum and count of the returns of each environment's latest
-    finished episode. A few scalars now and then, where brax's `log_training_metrics` copies every
-    environment's episode metrics to the host on every update (docs/RESULTS.md: 22% slower)."""
-
-    def __init__(self, env, record, every: int):
-        super().__init__(env)
-        self.record, self.every = record, every
+class LastReturn(Wrapper):
+    """Keeps each environment's latest finished episode return in `info["last_return"]` (NaN before
+    its first), for the progress line: the host reads it between updates (`hexa_mjx.ppo`)."""
 
     def reset(self, rng: jax.Array) -> State:
         state = self.env.reset(rng)
-        state.info["progress_clock"] = jp.zeros(rng.shape[:-1], jp.int32)
         state.info["last_return"] = jp.full(rng.shape[:-1], jp.nan, jp.float32)  # not weak-typed: one compile
         return state
 
     def step(self, state: State, action: jax.Array) -> State:
         state = self.env.step(state, action)
-        clock = state.info["progress_clock"] + 1
         # brax's EpisodeWrapper holds the episode's sum on the step it ends (zeroed on the next).
-        last = jp.where(state.info["episode_done"] > 0, state.info["episode_metrics"]["sum_reward"],
-                        state.info["last_return"])
-        state.info.update(progress_clock=clock, last_return=last)
-        finished = jp.isfinite(last)
-        report = (clock[0], jp.sum(jp.where(finished, last, 0.0)), jp.sum(finished))
-        jax.lax.cond(clock[0] % self.every == 0, lambda r: jax.debug.callback(self.record, *r), lambda r: None,
-                     report)
+        state.info["last_return"] = jp.where(state.info["episode_done"] > 0, state.info["episode_metrics"]["sum_reward"],
+                                             state.info["last_return"])
         return state
 
 
+def mean_last_return(state: State) -> float:
+    """The mean of the environments' latest finished returns (NaN before any has finished)."""
+    returns = np.asarray(state.info["last_return"])
+    finished = np.isfinite(returns)
+    return float(returns[finished].mean()) if finished.any() else math.nan
+
+
 def wrap_for_training(env, episode_length: int = 1000, action_repeat: int = 1, randomization_fn=None,
-                      level_record=None, progress_record=None, progress_every: int = 64,
-                      fresh_starts: bool = True, failure_schedule: dict | None = None):
+                      track_returns: bool = False, fresh_starts: bool = True, failure_schedule: dict | None = None):
     """brax's `envs.training.wrap` with `FreshStartAutoReset` in place of its AutoResetWrapper
     (brax's with `fresh_starts=False`) and `RandomizedVmap` in place of its VmapWrapper when there
     is a `randomization_fn`. `failure_schedule` (keyword arguments of
-    `failure_schedule.LegFailureSchedule`) schedules the training environments' leg failures. With a
-    curriculum and a `level_record` callback, `curriculum.LevelTap` reports the levels to it; with a
-    `progress_record`, `ProgressTap` reports every `progress_every` steps."""
+    `failure_schedule.LegFailureSchedule`) schedules the training environments' leg failures. With
+    `track_returns`, `LastReturn` keeps each environment's latest return."""
     env = RandomizedVmap(env, randomization_fn) if randomization_fn else brax_training.VmapWrapper(env)
     env = brax_training.EpisodeWrapper(env, episode_length, action_repeat)
     env = FreshStartAutoReset(env) if fresh_starts else brax_training.AutoResetWrapper(env)
     env = LegFailureSchedule(env, **failure_schedule) if failure_schedule is not None else env
-    levels = env.unwrapped.config.curriculum_levels if level_record else 0  # brax's eval env has none
-    env = LevelTap(env, levels, level_record) if levels else env
-    return ProgressTap(env, progress_record, progress_every) if progress_record else env
+    return LastReturn(env) if track_returns else env

@@ -8,7 +8,7 @@ import jax
 import numpy as np
 import optax
 
-from hexa_mjx import checkpoints, config, faults, optimizer_state, training
+from hexa_mjx import checkpoints, config, faults, optimizer_state, ppo, training
 
 from conftest import NOISE, TINY, run
 from test_scale_out import free_port, process_flags, rows as metric_rows, train_processes
@@ -50,7 +50,7 @@ def test_kills_at_chosen_moments_resume_with_every_row_once(tmp_path, cache_env)
     out = results[0][1]
     assert "removed half-written" in out and "from step 64" in out and "x 2 processes" in out, out
     # Step 64's row was logged before the crash; the compile lines are printed all the same.
-    assert "evaluation compiled and run in" in out and "training compiled and its first rollout" in out, out
+    assert "evaluation compiled and run in" in out and "training compiled and its first update" in out, out
     assert "process 1 done" in results[1][1]
     assert rows(run_dir) == [0, 64, 128, 192, 256]  # each evaluation exactly once
     assert [s for s, _ in checkpoints.list_checkpoints(run_dir)] == [64, 128, 192, 256]
@@ -65,27 +65,24 @@ def test_kills_at_chosen_moments_resume_with_every_row_once(tmp_path, cache_env)
 
 
 def test_a_restored_adam_continues_as_the_uninterrupted_one():
-    """brax's Adam, built through the recording layer and restored mid-run from what it recorded,
-    takes the same steps as an uninterrupted Adam (the layer loses nothing)."""
-    from brax.training.agents.ppo import train as ppo_train
-
+    """PPO's optimizer (Adam after gradient clipping), restored mid-run from the Adam state a
+    checkpoint keeps (`ppo.adam_of`, as host arrays), takes the same steps as an uninterrupted one."""
     grad = lambda p, i: jax.tree.map(lambda x: jax.numpy.sin(x * (i + 1)), p)  # noqa: E731
     params = {"w": jax.numpy.arange(6.0).reshape(2, 3), "b": jax.numpy.ones(3)}
+    opt = optax.chain(optax.clip_by_global_norm(1.0), optax.adam(learning_rate=0.1))
+    update = jax.jit(opt.update)
 
-    def run_adam(recorder, p, start, stop):
-        with optimizer_state.recording(recorder):
-            opt = ppo_train.optax.chain(optax.clip_by_global_norm(1.0), ppo_train.optax.adam(learning_rate=0.1))
-            state = opt.init(p)  # as brax's PPO does: build and initialize inside ppo.train
-        update = jax.jit(opt.update)
+    def run_adam(p, state, start, stop):
         for i in range(start, stop):
             updates, state = update(grad(p, i), state)
             p = optax.apply_updates(p, updates)
-        return p, recorder.latest
+        return p, state
 
-    whole, _ = run_adam(optimizer_state.AdamRecorder(updates_per_batch=2), params, 0, 8)
-    half, recorded = run_adam(optimizer_state.AdamRecorder(updates_per_batch=2), params, 0, 4)
-    assert int(recorded[0].count) == 4
-    resumed, _ = run_adam(optimizer_state.AdamRecorder(2, restored=recorded), half, 4, 8)
+    whole, _ = run_adam(params, opt.init(params), 0, 8)
+    half, state = run_adam(params, opt.init(params), 0, 4)
+    saved = jax.tree.map(np.asarray, ppo.adam_of(state))
+    assert int(saved[0].count) == 4
+    resumed, _ = run_adam(half, ppo.with_adam(opt.init(half), saved), 4, 8)
     jax.tree.map(np.testing.assert_array_equal, resumed, whole)
-    fresh, _ = run_adam(optimizer_state.AdamRecorder(2), half, 4, 8)  # what brax alone would resume
+    fresh, _ = run_adam(half, opt.init(half), 4, 8)  # Adam started afresh on resume
     assert not np.allclose(fresh["w"], whole["w"])

@@ -48,8 +48,7 @@ def test_goal_ranges_open_with_the_level(cur_env):
 
 
 def test_training_environments_keep_their_level_and_report_it(cur_env):
-    histogram = curriculum.LevelHistogram(LEVELS, devices=1)
-    env = curriculum.LevelTap(wrappers.wrap_for_training(cur_env, episode_length=10), LEVELS, histogram, every=5)
+    env = wrappers.wrap_for_training(cur_env, episode_length=10)
     step = jax.jit(env.step)
     state = jax.jit(env.reset)(jax.random.split(jax.random.PRNGKey(1), 3))
     on_torso = jax.vmap(lambda d: cur_env.set_goal(d, d.qpos[:2]))(state.pipeline_state)
@@ -57,7 +56,7 @@ def test_training_environments_keep_their_level_and_report_it(cur_env):
     np.testing.assert_array_equal(state.info["level"], [1, 1, 1])
     for _ in range(4):
         state = step(state, jp.zeros((3, 18)))
-    assert histogram.summary()["curriculum/level_1"] == 1.0  # the snapshot after step 5
+    assert curriculum.level_summary(state.info["level"], LEVELS)["curriculum/level_1"] == 1.0
     for _ in range(5):  # the first episode ends with its goal reached: the level stays
         state = step(state, jp.zeros((3, 18)))
     np.testing.assert_array_equal(state.info["level"], [1, 1, 1])
@@ -66,8 +65,11 @@ def test_training_environments_keep_their_level_and_report_it(cur_env):
     for _ in range(10):  # standing still, the second episode reaches no goal: down a level
         state = step(state, jp.zeros((3, 18)))
     np.testing.assert_array_equal(state.info["level"], [0, 0, 0])
-    summary = histogram.summary()
+    summary = curriculum.level_summary(state.info["level"], LEVELS)
     assert summary["curriculum/level_0"] == 1.0 and summary["curriculum/level_mean"] == 0.0
+    summary = curriculum.level_summary(np.array([[0, 1], [1, LEVELS - 1]]), LEVELS)  # (devices, environments)
+    assert summary["curriculum/level_1"] == 0.5 and summary["curriculum/top_level_share"] == 0.25
+    assert summary["curriculum/level_mean"] == (0 + 1 + 1 + LEVELS - 1) / 4
 
 
 def test_only_random_navigation_goals_have_a_curriculum():

@@ -6,6 +6,7 @@ import os
 import re
 import shutil
 import subprocess
+from pathlib import Path
 from types import SimpleNamespace
 
 import imageio.v2 as imageio
@@ -31,12 +32,20 @@ def test_train_writes_run_directory(trained):
     assert "success" in proc.stdout and "steps/s" in proc.stdout and "done:" in proc.stdout
     # Compiling is announced, and its end (the first training update) reported.
     assert "compiling the environment and evaluation programs" in proc.stdout
-    assert re.search(r"training compiled and its first rollout ran in \d+ s", proc.stdout)
+    assert re.search(r"training compiled and its first update ran in \d+ s", proc.stdout)
     # The untrained params (step 0) and the trained ones (64) are evaluated by one program.
     assert proc.stderr.count("Compiling jit(generate_eval_unroll)") == 1, proc.stderr[-3000:]
     # One CPU device per core, as many as divide the 8 envs and the batch of 8.
     devices = max(d for d in range(1, len(os.sched_getaffinity(0)) + 1) if 8 % d == 0)
     assert f"on 8 envs ({devices} cpu device" in proc.stdout
+
+
+def test_training_program_is_compiled_once_and_kept_in_the_cache(trained, cache_env):
+    """hexa_mjx.ppo's update has no host callback, so JAX's cache keeps it (brax's training epoch,
+    with the progress line's and Adam's callbacks, was compiled afresh by every run)."""
+    _, proc = trained
+    assert proc.stderr.count("Compiling update (") == 1, proc.stderr[-3000:]
+    assert list(Path(cache_env["JAX_COMPILATION_CACHE_DIR"]).glob("pmap_update-*"))
 
 
 def test_saved_config_round_trips(trained):
@@ -59,7 +68,7 @@ def test_init_from_fine_tunes_from_another_runs_params(trained, tmp_path, cache_
     # No evaluation before training: training compiles first, and the first row is after it.
     assert [r["step"] for r in rows(run_dir)] == [64]
     announced = [proc.stdout.index(line) for line in ("compiling the environment and training programs",
-                                                      "training compiled and its first rollout",
+                                                      "training compiled and its first update",
                                                       "evaluation compiled and run in")]
     assert announced == sorted(announced), proc.stdout
     cfg = config.load_config(run_dir)

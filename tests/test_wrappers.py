@@ -1,5 +1,5 @@
 """The training wrappers on a toy environment: FreshStartAutoReset draws a new start state at every
-episode boundary; ProgressTap reports the latest finished episodes' returns."""
+episode boundary; LastReturn keeps the latest finished episodes' returns."""
 
 import jax
 import jax.numpy as jp
@@ -68,31 +68,30 @@ def test_zero_noise_uses_brax_wrappers():
     assert training.wrap_env_fn(hexa_mjx.make_env(task="navigate")) is wrappers.wrap_for_training  # random headings
 
 
-def test_progress_tap_reports_steps_and_finished_episodes_returns():
-    reports = []
-    env = wrappers.wrap_for_training(Toy(), episode_length=3, progress_every=2,
-                                     progress_record=lambda *r: reports.append([float(x) for x in r]))
+def test_last_return_keeps_each_environments_latest_finished_episode():
+    env = wrappers.wrap_for_training(Toy(), episode_length=3, track_returns=True)
     state = jax.jit(env.reset)(jax.random.split(jax.random.PRNGKey(0), 2))
     step = jax.jit(env.step)
-    # A stepped state has the reset state's types, weak types included: brax's epoch compiles once.
+    # A stepped state has the reset state's types, weak types included: the update compiles once.
     typeof = lambda s: [(x.shape, x.dtype, x.weak_type) for x in jax.tree.leaves(jax.tree.map(jax.typeof, s))]  # noqa: E731
     assert typeof(jax.eval_shape(env.step, state, jp.zeros((2, 1)))) == typeof(state)
+    assert np.isnan(wrappers.mean_last_return(state))  # no episode has finished
     # env 0 ends every step with return 20; env 1 earns 1 per step and ends at its 3-step limit.
-    for _ in range(4):
+    state = step(state, jp.array([[20.0], [1.0]]))
+    np.testing.assert_array_equal(np.isnan(state.info["last_return"]), [False, True])
+    assert wrappers.mean_last_return(state) == 20.0  # only env 0 has finished
+    for _ in range(2):
         state = step(state, jp.array([[20.0], [1.0]]))
-        jax.effects_barrier()
-        if len(reports) == 1:
-            assert reports == [[2, 20, 1]]  # after 2 steps only env 0 has finished an episode
-    assert reports == [[2, 20, 1], [4, 23, 2]]  # env 1's first episode returned 3
+    np.testing.assert_allclose(state.info["last_return"], [20.0, 3.0])
+    assert wrappers.mean_last_return(state) == 11.5
 
 
-def test_only_the_training_environments_are_tapped():
+def test_returns_are_tracked_on_brax_auto_reset_too():
     import hexa_mjx
     from brax.envs.wrappers import training as brax_training
 
     from hexa_mjx import training
 
-    wrap = training.wrap_env_fn(hexa_mjx.make_env(), progress_record=print)  # fixed start: brax's auto-reset
-    first, second = wrap(hexa_mjx.make_env(), episode_length=10), wrap(hexa_mjx.make_env(), episode_length=10)
-    assert isinstance(first, wrappers.ProgressTap) and isinstance(first.env, brax_training.AutoResetWrapper)
-    assert isinstance(second, brax_training.AutoResetWrapper)  # brax's evaluation environments
+    wrap = training.wrap_env_fn(hexa_mjx.make_env(), track_returns=True)  # fixed start: brax's auto-reset
+    env = wrap(hexa_mjx.make_env(), episode_length=10)
+    assert isinstance(env, wrappers.LastReturn) and isinstance(env.env, brax_training.AutoResetWrapper)

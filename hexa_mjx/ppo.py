@@ -1,0 +1,180 @@
+"""PPO's training loop over brax's PPO parts: one compiled program per update, no host callbacks.
+
+brax's `ppo.train` compiles one program per evaluation interval and, between evaluations, gives
+the host nothing but host callbacks; JAX's compile cache keeps no program that has one, so every
+run compiled its training program again (docs/RESULTS.md, "Warm start"). `train` runs the same
+computation with the same keys as `ppo.train` does for the settings hexa_mjx uses (brax's losses,
+gradients, rollouts and observation normalizer; tests/test_ppo.py checks the params against
+`ppo.train`), but returns to the host after every update. The progress line, Adam's state for a
+checkpoint and the evaluations then need no callback, and a second run loads the program from
+the cache.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Callable
+
+import jax
+import jax.numpy as jp
+import numpy as np
+import optax
+from brax import envs
+from brax.training import acting, gradients, pmap, types
+from brax.training.acme import running_statistics, specs
+from brax.training.agents.ppo import losses as ppo_losses
+from brax.training.agents.ppo import networks as ppo_networks
+from brax.training.agents.ppo.train import TrainingState
+
+AXIS = "i"  # the pmap axis the gradients and the normalizer are averaged over
+UNROLL_FIELDS = ("truncation", "episode_metrics", "episode_done")
+
+
+def unpmap(tree):
+    """The first local device's copy of a replicated tree."""
+    return jax.tree.map(lambda x: x.addressable_shards[0].data.squeeze(0), tree)
+
+
+def strong_types(tree):
+    """`tree` with weak types removed: one compile for the first update and the later ones."""
+    return jax.tree.map(lambda x: jp.asarray(x).astype(jp.asarray(x).dtype), tree)
+
+
+def adam_of(optimizer_state):
+    """Adam's part of the optimizer state (gradient clipping's part holds nothing)."""
+    return optimizer_state[1]
+
+
+def with_adam(optimizer_state, adam_state):
+    """The optimizer state with Adam's part replaced by `adam_state` (host arrays, as saved)."""
+    restored = jax.tree.map(lambda saved, fresh: jp.asarray(saved, dtype=fresh.dtype), adam_state,
+                            adam_of(optimizer_state))
+    return (optimizer_state[0], restored)
+
+
+def train(environment, *, num_timesteps: int, num_evals: int, seed: int, num_envs: int, episode_length: int,
+          unroll_length: int, batch_size: int, num_minibatches: int, num_updates_per_batch: int,
+          learning_rate: float, entropy_cost: float, discounting: float, reward_scaling: float,
+          clipping_epsilon: float, gae_lambda: float, max_grad_norm: float, vf_loss_coefficient: float,
+          network_factory, normalize_observations: bool = True, max_devices_per_host: int | None = None,
+          wrap_env_fn=None, randomization_fn=None, restore_params=None, restore_adam=None,
+          on_interval: Callable | None = None, on_update: Callable | None = None):
+    """PPO as brax's `ppo.train` runs it (same arguments), for `num_timesteps` env steps in
+    `num_evals - 1` intervals. On process 0, `on_interval(step, make_policy, params, adam_state,
+    env_state)` is called before training and after each interval (params and Adam's state as host
+    copies; the training environments' state laid out (devices, environments per device, ...));
+    `on_update(step, env_state)` after every update, once it has run. `restore_params` and
+    `restore_adam` (host arrays, `optimizer_state.adam_template`'s structure) continue a run.
+    Returns the final (normalizer, policy, value) params."""
+    if not normalize_observations:
+        raise ValueError("hexa_mjx's PPO always normalizes observations")
+    process_id, process_count = jax.process_index(), jax.process_count()
+    devices = jax.local_devices()[:max_devices_per_host or None]
+    device_count = len(devices) * process_count
+    if num_envs % device_count or (batch_size * num_minibatches) % num_envs:
+        raise ValueError(f"num_envs {num_envs} must divide over {device_count} devices and divide "
+                         f"batch_size x num_minibatches ({batch_size * num_minibatches})")
+    steps_per_update = batch_size * unroll_length * num_minibatches
+    intervals = max(num_evals - 1, 1)
+    updates_per_interval = int(np.ceil(num_timesteps / (intervals * steps_per_update)))
+
+    # brax's keys, drawn in brax's order, so that a run agrees with ppo.train from the same seed.
+    global_key, local_key = jax.random.split(jax.random.PRNGKey(seed))
+    local_key = jax.random.fold_in(local_key, process_id)
+    local_key, key_env, _ = jax.random.split(local_key, 3)
+    key_policy, key_value = jax.random.split(global_key)
+
+    randomize = None
+    if randomization_fn is not None:  # one model per environment, the same draw on every device
+        randomize = functools.partial(randomization_fn, rng=jax.random.split(key_env, num_envs // device_count))
+    env = (wrap_env_fn or envs.training.wrap)(environment, episode_length=episode_length, action_repeat=1,
+                                             randomization_fn=randomize)
+    key_envs = jax.random.split(key_env, num_envs // process_count)
+    env_state = jax.pmap(env.reset, axis_name=AXIS)(key_envs.reshape((len(devices), -1) + key_envs.shape[1:]))
+
+    obs_shape = env_state.obs.shape[2:]
+    network = network_factory(obs_shape, env.action_size, preprocess_observations_fn=running_statistics.normalize)
+    make_policy = ppo_networks.make_inference_fn(network)
+    optimizer = optax.chain(optax.clip_by_global_norm(max_grad_norm), optax.adam(learning_rate))
+    loss_and_grad = gradients.loss_and_pgrad(
+        functools.partial(ppo_losses.compute_ppo_loss, ppo_network=network, entropy_cost=entropy_cost,
+                          discounting=discounting, reward_scaling=reward_scaling, gae_lambda=gae_lambda,
+                          clipping_epsilon=clipping_epsilon, normalize_advantage=True,
+                          vf_coefficient=vf_loss_coefficient),
+        pmap_axis_name=AXIS, has_aux=True)
+
+    def minibatch_step(carry, data, normalizer):
+        opt_state, params, key = carry
+        key, key_loss = jax.random.split(key)
+        _, grads = loss_and_grad(params, normalizer, data, key_loss)
+        step, opt_state = optimizer.update(grads, opt_state)
+        return (opt_state, optax.apply_updates(params, step), key), None
+
+    def sgd_epoch(carry, _, data, normalizer):
+        opt_state, params, key = carry
+        key, key_perm, key_grad = jax.random.split(key, 3)
+        shuffled = jax.tree.map(lambda x: jax.random.permutation(key_perm, x).reshape(
+            (num_minibatches, -1) + x.shape[1:]), data)
+        (opt_state, params, _), _ = jax.lax.scan(functools.partial(minibatch_step, normalizer=normalizer),
+                                                 (opt_state, params, key_grad), shuffled, length=num_minibatches)
+        return (opt_state, params, key), None
+
+    def update(state: TrainingState, env_state, key):
+        """One PPO update: every environment rolls out, then epochs of minibatch SGD on the batch."""
+        key_sgd, key_unroll, next_key = jax.random.split(key, 3)
+        policy = make_policy((state.normalizer_params, state.params.policy, state.params.value))
+
+        def unroll(carry, _):
+            env_state, key = carry
+            key, next_key = jax.random.split(key)
+            env_state, data = acting.generate_unroll(env, env_state, policy, key, unroll_length,
+                                                     extra_fields=UNROLL_FIELDS)
+            return (env_state, next_key), data
+
+        (env_state, _), data = jax.lax.scan(unroll, (env_state, key_unroll), (),
+                                            length=batch_size * num_minibatches // num_envs)
+        # (unrolls x environments x steps) -> (unrolls * environments, steps)
+        data = jax.tree.map(lambda x: jp.swapaxes(x, 1, 2), data)
+        data = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), data)
+        normalizer = running_statistics.update(state.normalizer_params, data.observation, pmap_axis_name=AXIS)
+        (opt_state, params, _), _ = jax.lax.scan(functools.partial(sgd_epoch, data=data, normalizer=normalizer),
+                                                 (state.optimizer_state, state.params, key_sgd), (),
+                                                 length=num_updates_per_batch)
+        return TrainingState(optimizer_state=opt_state, params=params, normalizer_params=normalizer,
+                             env_steps=state.env_steps + steps_per_update), env_state, next_key
+
+    update = jax.pmap(update, axis_name=AXIS, donate_argnums=(0, 1))
+
+    params = ppo_losses.PPONetworkParams(policy=network.policy_network.init(key_policy),
+                                         value=network.value_network.init(key_value))
+    state = TrainingState(optimizer_state=optimizer.init(params), params=params,
+                          normalizer_params=running_statistics.init_state(specs.Array(obs_shape, jp.dtype("float32"))),
+                          env_steps=types.UInt64(hi=0, lo=0))
+    if restore_params is not None:
+        normalizer, policy, value = restore_params
+        state = state.replace(normalizer_params=normalizer, params=ppo_losses.PPONetworkParams(policy, value))
+    if restore_adam is not None:
+        state = state.replace(optimizer_state=with_adam(state.optimizer_state, restore_adam))
+    state, env_state = jax.device_put_replicated(strong_types(state), devices), strong_types(env_state)
+
+    def report(step):
+        if process_id == 0 and on_interval is not None:
+            host = jax.tree.map(np.asarray, unpmap((state.normalizer_params, state.params.policy, state.params.value,
+                                                     adam_of(state.optimizer_state))))
+            on_interval(step, make_policy, host[:3], host[3], env_state)
+
+    report(0)
+    step = 0
+    for _ in range(intervals):
+        epoch_key, local_key = jax.random.split(local_key)
+        key = jax.random.split(epoch_key, len(devices))
+        for _ in range(updates_per_interval):
+            state, env_state, key = update(state, env_state, key)
+            step += steps_per_update
+            if on_update is not None:
+                jax.block_until_ready(state.params)  # the update has run: the progress line's clock is true
+                on_update(step, env_state)
+        report(step)
+    pmap.assert_is_replicated(state)
+    pmap.synchronize_hosts()
+    return jax.tree.map(np.asarray, unpmap((state.normalizer_params, state.params.policy, state.params.value)))

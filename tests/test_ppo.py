@@ -1,0 +1,57 @@
+"""hexa_mjx.ppo runs brax's PPO: the same params as brax's `ppo.train` from the same seed, with the
+host called back between updates instead of from inside the program."""
+
+import jax
+import numpy as np
+import pytest
+
+from hexa_mjx import config, ppo, training
+
+# A tiny rollout (8 envs x 4 steps x 2 minibatches = 64 env steps per update), two intervals of two
+# updates, start noise drawn per episode (hexa_mjx's wrappers), two epochs of SGD, small networks.
+CFG = config.TrainConfig(num_envs=8, batch_size=8, num_minibatches=2, unroll_length=4, episode_length=20,
+                         update_epochs=2, hidden=[32, 32], start_joint_noise=0.05)
+
+
+@pytest.fixture(scope="module")
+def settings():
+    env = config.make_env_for(CFG)
+    return env, dict(num_timesteps=192, num_evals=3, seed=5, **training.ppo_settings(CFG),
+                     max_devices_per_host=2, wrap_env_fn=training.wrap_env_fn(env))
+
+
+@pytest.fixture(scope="module")
+def ours(settings):
+    env, kwargs = settings
+    intervals, updates = [], []
+    params = ppo.train(env, **kwargs, on_interval=lambda step, _, p, adam, env_state: intervals.append((step, p, adam)),
+                       on_update=lambda step, env_state: updates.append((step, env_state.obs.shape)))
+    return params, intervals, updates
+
+
+def test_same_params_as_brax_ppo_train(settings, ours):
+    from brax.training.agents.ppo import train as brax_ppo
+
+    env, kwargs = settings
+    _, reference, _ = brax_ppo.train(environment=env, run_evals=False, num_eval_envs=2, **kwargs)
+    params, _, _ = ours
+    assert jax.tree.structure(params) == jax.tree.structure(jax.tree.map(np.asarray, reference))
+    jax.tree.map(np.testing.assert_array_equal, params, reference)
+
+
+def test_host_sees_every_update_and_each_interval(ours):
+    params, intervals, updates = ours
+    # brax's rounding: 192 steps in 2 intervals of ceil(192 / 128) updates of 64 steps each.
+    assert [step for step, _ in updates] == [64, 128, 192, 256]
+    devices = len(jax.local_devices()[:2])
+    assert {shape for _, shape in updates} == {(devices, 8 // devices, 52)}
+    assert [step for step, _, _ in intervals] == [0, 128, 256]
+    # Adam's step count: 2 epochs x 2 minibatches per update; its state is what a checkpoint saves.
+    assert [int(adam[0].count) for _, _, adam in intervals] == [0, 8, 16]
+    jax.tree.map(np.testing.assert_array_equal, intervals[-1][1], params)
+
+
+def test_bad_shapes_are_refused_before_anything_compiles(settings):
+    env, kwargs = settings
+    with pytest.raises(ValueError, match="num_envs 6 must divide"):
+        ppo.train(env, **{**kwargs, "num_envs": 6})
