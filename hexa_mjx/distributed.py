@@ -1,6 +1,6 @@
 """Multi-process training with JAX's own runtime (`jax.distributed`).
 
-Each process runs train.py with the same flags plus its `--process_id`; brax's PPO splits the
+Each process runs train.py with the same flags plus its `--process_id`; PPO (hexa_mjx.ppo) splits the
 environments over every device of every process, averages gradients across all of them, and
 evaluates on process 0 only. Process 0 alone writes the run directory. Under SLURM or Open MPI
 JAX finds the coordinator, process count and id itself when the flags are absent.

@@ -211,7 +211,8 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
         logger.compiling(evaluation_first=evaluate_start)
     ppo.train(env, num_timesteps=remaining, num_evals=evals_for(cfg, remaining), seed=cfg.seed + start_step,
               **ppo_settings(cfg), max_devices_per_host=devices,
-              wrap_env_fn=wrap_env_fn(env, cfg.randomize, track_returns=cfg.progress, failure_schedule=schedule),
+              # Returns are kept whether or not this process prints them: every process runs one program.
+              wrap_env_fn=wrap_env_fn(env, cfg.randomize, track_returns=True, failure_schedule=schedule),
               randomization_fn=randomization_fn, restore_params=restore, restore_adam=optimizer,
               on_interval=on_interval if main else None,
               on_update=on_update if main and cfg.progress else None)
