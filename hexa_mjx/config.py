@@ -28,6 +28,9 @@ class TrainConfig:
     num_timesteps: int = dataclasses.field(default=2_000_000, metadata={"help": "environment steps in total"})
     seed: int = dataclasses.field(default=0, metadata={"help": "random seed"})
     lr: float = dataclasses.field(default=3e-4, metadata={"help": "Adam learning rate"})
+    anneal_lr: bool = dataclasses.field(default=False, metadata={
+        "help": "CleanRL's schedule: the learning rate falls linearly to 0 at --num_timesteps (default: constant, "
+                "the report's Table 1)"})
     task: str = dataclasses.field(default="goal", metadata={
         "help": "'goal': the report's task (one goal 1.5 m ahead); 'navigate': goals in every direction",
         "choices": sorted(TASKS)})

@@ -58,13 +58,16 @@ def train(environment, *, num_timesteps: int, num_evals: int, seed: int, num_env
           clipping_epsilon: float, gae_lambda: float, max_grad_norm: float, vf_loss_coefficient: float,
           network_factory, normalize_observations: bool = True, max_devices_per_host: int | None = None,
           wrap_env_fn=None, randomization_fn=None, restore_params=None, restore_adam=None,
-          on_interval: Callable | None = None, on_update: Callable | None = None):
+          anneal_lr: tuple[int, int] | None = None, on_interval: Callable | None = None,
+          on_update: Callable | None = None):
     """PPO as brax's `ppo.train` runs it (same arguments), for `num_timesteps` env steps in
     `num_evals - 1` intervals. On process 0, `on_interval(step, make_policy, params, adam_state,
     env_state)` is called before training and after each interval (params and Adam's state as host
     copies; the training environments' state laid out (devices, environments per device, ...));
     `on_update(step, env_state)` after every update, once it has run. `restore_params` and
     `restore_adam` (host arrays, `optimizer_state.adam_template`'s structure) continue a run.
+    `anneal_lr=(done, total)`: CleanRL's schedule, the learning rate falling linearly from
+    `learning_rate` at env step 0 to 0 at `total`, for a run that has `done` steps behind it.
     Returns the final (normalizer, policy, value) params."""
     if not normalize_observations:
         raise ValueError("hexa_mjx's PPO always normalizes observations")
@@ -103,20 +106,23 @@ def train(environment, *, num_timesteps: int, num_evals: int, seed: int, num_env
                           vf_coefficient=vf_loss_coefficient),
         pmap_axis_name=AXIS, has_aux=True)
 
-    def minibatch_step(carry, data, normalizer):
+    def minibatch_step(carry, data, normalizer, lr_scale):
         opt_state, params, key = carry
         key, key_loss = jax.random.split(key)
         _, grads = loss_and_grad(params, normalizer, data, key_loss)
         step, opt_state = optimizer.update(grads, opt_state)
+        if anneal_lr is not None:  # Adam's step is proportional to its learning rate
+            step = jax.tree.map(lambda x: x * lr_scale, step)
         return (opt_state, optax.apply_updates(params, step), key), None
 
-    def sgd_epoch(carry, _, data, normalizer):
+    def sgd_epoch(carry, _, data, normalizer, lr_scale):
         opt_state, params, key = carry
         key, key_perm, key_grad = jax.random.split(key, 3)
         shuffled = jax.tree.map(lambda x: jax.random.permutation(key_perm, x).reshape(
             (num_minibatches, -1) + x.shape[1:]), data)
-        (opt_state, params, _), _ = jax.lax.scan(functools.partial(minibatch_step, normalizer=normalizer),
-                                                 (opt_state, params, key_grad), shuffled, length=num_minibatches)
+        (opt_state, params, _), _ = jax.lax.scan(
+            functools.partial(minibatch_step, normalizer=normalizer, lr_scale=lr_scale),
+            (opt_state, params, key_grad), shuffled, length=num_minibatches)
         return (opt_state, params, key), None
 
     def update(state: TrainingState, env_state, key):
@@ -133,11 +139,17 @@ def train(environment, *, num_timesteps: int, num_evals: int, seed: int, num_env
 
         (env_state, _), data = jax.lax.scan(unroll, (env_state, key_unroll), (),
                                             length=batch_size * num_minibatches // num_envs)
-        # (unrolls x environments x steps) -> (unrolls * environments, steps)
+        # (unrolls x steps x environments) -> (unrolls * environments, steps)
         data = jax.tree.map(lambda x: jp.swapaxes(x, 1, 2), data)
         data = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), data)
         normalizer = running_statistics.update(state.normalizer_params, data.observation, pmap_axis_name=AXIS)
-        (opt_state, params, _), _ = jax.lax.scan(functools.partial(sgd_epoch, data=data, normalizer=normalizer),
+        lr_scale = 1.0
+        if anneal_lr is not None:  # the share of the run still ahead, as CleanRL's `frac`
+            done, total = anneal_lr
+            steps = state.env_steps.hi.astype(jp.float32) * 2.0 ** 32 + state.env_steps.lo.astype(jp.float32)
+            lr_scale = jp.clip(1.0 - (done + steps) / total, 0.0, 1.0)
+        (opt_state, params, _), _ = jax.lax.scan(functools.partial(sgd_epoch, data=data, normalizer=normalizer,
+                                                                   lr_scale=lr_scale),
                                                  (state.optimizer_state, state.params, key_sgd), (),
                                                  length=num_updates_per_batch)
         return TrainingState(optimizer_state=opt_state, params=params, normalizer_params=normalizer,

@@ -214,6 +214,7 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
               # Returns are kept whether or not this process prints them: every process runs one program.
               wrap_env_fn=wrap_env_fn(env, cfg.randomize, track_returns=True, failure_schedule=schedule),
               randomization_fn=randomization_fn, restore_params=restore, restore_adam=optimizer,
+              anneal_lr=(start_step, cfg.num_timesteps) if cfg.anneal_lr else None,
               on_interval=on_interval if main else None,
               on_update=on_update if main and cfg.progress else None)
     total = time.time() - t0

@@ -55,3 +55,19 @@ def test_bad_shapes_are_refused_before_anything_compiles(settings):
     env, kwargs = settings
     with pytest.raises(ValueError, match="num_envs 6 must divide"):
         ppo.train(env, **{**kwargs, "num_envs": 6})
+
+
+def test_annealed_learning_rate_reaches_zero_at_the_end(settings, ours):
+    """CleanRL's schedule: at the run's last step the learning rate is 0, so a run that starts
+    there leaves the networks as they were, while the normalizer still learns."""
+    env, kwargs = settings
+    intervals = []
+    ppo.train(env, **kwargs, anneal_lr=(256, 256),
+              on_interval=lambda step, _, p, adam, env_state: intervals.append(p))
+    (norm0, policy0, value0), (norm, policy, value) = intervals[0], intervals[-1]
+    jax.tree.map(np.testing.assert_array_equal, (policy, value), (policy0, value0))
+    assert not np.array_equal(norm.mean, norm0.mean)
+    # From step 0 the schedule leaves most of the learning rate: the params move, but not as without it.
+    moved = jax.tree.leaves(ppo.train(env, **kwargs, anneal_lr=(0, 256))[1])
+    for other in (policy0, ours[0][1]):
+        assert not all(np.array_equal(a, b) for a, b in zip(moved, jax.tree.leaves(other)))
