@@ -30,7 +30,7 @@ class TrainConfig:
     lr: float = dataclasses.field(default=3e-4, metadata={"help": "Adam learning rate"})
     anneal_lr: bool = dataclasses.field(default=False, metadata={
         "help": "CleanRL's schedule: the learning rate falls linearly to 0 at --num_timesteps (default: constant, "
-                "the report's Table 1)"})
+                "the report's Table 1; on the fast preset it did worse, docs/RESULTS.md)"})
     task: str = dataclasses.field(default="goal", metadata={
         "help": "'goal': the report's task (one goal 1.5 m ahead); 'navigate': goals in every direction",
         "choices": sorted(TASKS)})
@@ -137,7 +137,7 @@ class TrainConfig:
                 "it; it runs about 30 s on a 2-core CPU)"})
     progress: bool = dataclasses.field(default=True, metadata={
         "help": "a console line every 15 s between evaluations and one when training has compiled "
-                "(--no_progress: off; it costs about 1%% of training speed, docs/RESULTS.md)"})
+                "(--no_progress: off; it costs under 1%% of training time in the median, docs/RESULTS.md)"})
     cpu_devices: int = dataclasses.field(default=0, metadata={
         "help": "on the CPU: XLA host devices that split environments and minibatches, one core each "
                 "(0: one per core, as many as divide num_envs and batch_size; 1: a single device)"})
