@@ -78,6 +78,8 @@ class TrainConfig:
         "choices": ["normal", "tanh_normal"]})
     mean_init_scale: float = dataclasses.field(default=0.01, metadata={
         "help": "init scale of the policy mean's output layer (CleanRL: 0.01, so early actions are near 0)"})
+    init_noise_std: float = dataclasses.field(default=1.0, metadata={
+        "help": "initial std of the policy's action noise, in action units (CleanRL: 1); learned after that"})
     episode_length: int = dataclasses.field(default=1000, metadata={"help": "control steps per episode"})
     start_joint_noise: float = dataclasses.field(default=0.0, metadata={
         "help": "rad, uniform noise on each joint's start angle, drawn per episode (0: the report's fixed start)"})
@@ -212,6 +214,7 @@ RANGES = {
     "clip": (0.0, math.inf, False, False), "vf_coef": (0.0, math.inf, True, False),
     "ent_coef": (0.0, math.inf, True, False), "max_grad_norm": (0.0, math.inf, False, False),
     "reward_scaling": (0.0, math.inf, False, False), "mean_init_scale": (0.0, math.inf, False, False),
+    "init_noise_std": (0.0, math.inf, False, False),
     "ctrl_hz": (0.0, math.inf, False, False), "batch_size": (1, math.inf, True, False),
     "num_minibatches": (1, math.inf, True, False), "num_envs": (1, math.inf, True, False),
 }

@@ -35,10 +35,10 @@ def network_factory(cfg: TrainConfig):
     """brax's PPO network factory with the config's layer sizes and tanh activations."""
     from brax.training.agents.ppo import networks as ppo_networks
 
-    # CleanRL's actor: state-independent log std starting at std 1, a small output layer for the mean.
+    # CleanRL's actor: state-independent log std (starting at std 1 by default), a small output layer for the mean.
     return functools.partial(ppo_networks.make_ppo_networks, policy_hidden_layer_sizes=tuple(cfg.hidden),
                              value_hidden_layer_sizes=tuple(cfg.hidden), activation=linen.tanh,
-                             distribution_type=cfg.policy_dist, noise_std_type="log", init_noise_std=1.0,
+                             distribution_type=cfg.policy_dist, noise_std_type="log", init_noise_std=cfg.init_noise_std,
                              mean_kernel_init_fn=jax.nn.initializers.variance_scaling,
                              mean_kernel_init_kwargs={"scale": cfg.mean_init_scale ** 2, "mode": "fan_in",
                                                       "distribution": "uniform"})

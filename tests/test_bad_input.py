@@ -36,6 +36,7 @@ TRAIN_CASES = [
     (["--max_grad_norm", "0"], "--max_grad_norm must be a finite number"),
     (["--reward_scaling", "inf"], "--reward_scaling must be a finite number"),
     (["--mean_init_scale", "0"], "--mean_init_scale must be a finite number"),
+    (["--init_noise_std", "0"], "--init_noise_std must be a finite number"),
     (["--batch_size", "0"], "--batch_size must be a finite number in [1, inf)"),
     (["--num_minibatches", "0"], "--num_minibatches must be a finite number in [1, inf)"),
     (["--num_envs", "0"], "--num_envs must be a finite number in [1, inf)"),

@@ -127,6 +127,17 @@ def test_checkpoint_restores_same_actions(tmp_path):
     assert not np.allclose(before, fresh)  # the comparison can tell different params apart
 
 
+@pytest.mark.parametrize("noise_std", [1.0, 0.4])
+def test_init_noise_std_sets_the_untrained_policys_action_noise(noise_std):
+    cfg = config.TrainConfig(hidden=[8, 8], init_noise_std=noise_std)
+    env = config.make_env_for(cfg)
+    params = training.init_params(cfg, env)
+    obs = jax.numpy.zeros((4096, env.observation_size))
+    mean = training.make_inference(cfg, env, params)(obs, jax.random.PRNGKey(0))
+    sampled = training.make_inference(cfg, env, params, deterministic=False)(obs, jax.random.PRNGKey(1))
+    np.testing.assert_allclose(np.std(np.asarray(sampled - mean)), noise_std, rtol=0.03)
+
+
 def test_eval_writes_video_and_metrics(trained, cache_env, tmp_path):
     run_dir, _ = trained
     out = tmp_path / "eval"
