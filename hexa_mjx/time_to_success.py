@@ -190,8 +190,8 @@ def main(argv=None) -> int:
                         help=f"configurations: {sorted(CONFIGS)} or NAME='--flag value ...' (default: default fast)")
     parser.add_argument("--seeds", type=int, nargs="+", default=[0], help="seeds (default: 0)")
     parser.add_argument("--target", type=float, default=0.9, help="success rate that counts (default: 0.9)")
-    parser.add_argument("--extra", default="", help="flags added to every run, e.g. '--num_timesteps 3000000' (a lone flag needs the "
-                        "equals sign: --extra=--no_compile_cache)")
+    parser.add_argument("--extra", default="", help="flags added to every run, e.g. '--num_timesteps 3000000' "
+                        "(a lone flag needs the equals sign: --extra=--no_compile_cache)")
     parser.add_argument("--fixed_start", action="store_true",
                         help="train and evaluate from the report's fixed start instead of random starts")
     parser.add_argument("--full", action="store_true", help="let every run finish its budget")
