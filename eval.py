@@ -16,7 +16,9 @@ import argparse
 import sys
 
 try:
-    from hexa_mjx import evaluation, jax_setup, nav_metrics, terrain
+    from hexa_mjx.evaluation import evaluate as evaluation, nav_metrics
+    from hexa_mjx.training import jax_setup
+    from hexa_mjx.mdp import terrain
     from hexa_mjx.tasks import TASKS
 except ImportError as e:  # a missing package, or a MUJOCO_GL that MuJoCo cannot use
     print(f"error: {e}", file=sys.stderr)
@@ -60,7 +62,7 @@ def main(argv=None) -> int:
     parser.add_argument("--randomize", action="store_true",
                         help="each episode on its own randomized physics (train.py --randomize's ranges)")
     parser.add_argument("--terrain", default=None, choices=terrain.KINDS,
-                        help="ground to evaluate on (default: the run's; hexa_mjx.terrain)")
+                        help="ground to evaluate on (default: the run's; hexa_mjx.mdp.terrain)")
     parser.add_argument("--terrain_seed", type=int, default=None, help="seed of the generated terrain (default: 0)")
     parser.add_argument("--terrain_difficulty", type=float, default=None,
                         help="terrain sizes as a fraction of the full ones, 0 to 1 (default: the run's)")

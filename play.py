@@ -38,7 +38,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--start_joint_noise", type=float, default=None, help="rad, start-angle noise (default: trained)")
     p.add_argument("--start_yaw_noise", type=float, default=None, help="goal task: rad, start-heading noise")
     p.add_argument("--randomize", action="store_true", help="a randomized physics model every episode (friction, "
-                   "masses, payload, servo gains and limits, damping, armature: hexa_mjx.randomization.Ranges)")
+                   "masses, payload, servo gains and limits, damping, armature: hexa_mjx.mdp.randomization.Ranges)")
     p.add_argument("--push_speed", type=float, default=None, help="m/s, planar kicks to the torso (default: trained)")
     p.add_argument("--push_interval", type=float, default=None, help="s between kicks")
     p.add_argument("--action_latency", type=float, default=None, help="control steps (0-1) of command delay")
@@ -48,7 +48,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     # No choices= here: hexa_mjx is imported only after the arguments (an unusable MUJOCO_GL stops
     # that import with one line); EnvConfig rejects an unknown kind with the list.
     p.add_argument("--terrain", default=None,
-                   help="ground: flat, bumps, slopes, steps or mixed (hexa_mjx.terrain; default: the policy's)")
+                   help="ground: flat, bumps, slopes, steps or mixed (hexa_mjx.mdp.terrain; default: the policy's)")
     p.add_argument("--terrain_seed", type=int, default=None, help="seed of the generated terrain (default: 0)")
     p.add_argument("--terrain_difficulty", type=float, default=None, help="terrain sizes as a fraction, 0 to 1")
     p.add_argument("--solver", default="trained", choices=["trained", "default"],
@@ -81,7 +81,8 @@ def onnx_file(policy: str, scratch: str) -> Path:
     """The ONNX file to play: the file itself, or a run/checkpoint exported into `scratch`."""
     path = Path(policy)
     if path.is_dir():
-        from hexa_mjx import export, jax_setup
+        from hexa_mjx.deploy import export
+        from hexa_mjx.training import jax_setup
 
         jax_setup.prepare_jax()
         print(f"exporting {path} to ONNX ...", flush=True)
@@ -96,7 +97,9 @@ def main(argv=None) -> int:
     if args.viewer:
         os.environ["MUJOCO_GL"] = "glfw"  # the window's OpenGL, not the off-screen default
     try:
-        from hexa_mjx import player, video
+        from hexa_mjx.deploy import player
+        from hexa_mjx.tasks import TASKS
+        from hexa_mjx.evaluation import video
     except ImportError as e:  # a missing package, or a MUJOCO_GL that MuJoCo cannot use
         print(f"error: {e}", file=sys.stderr)
         return 2
@@ -120,8 +123,9 @@ def main(argv=None) -> int:
             except ValueError:
                 raise ValueError(f'--disabled_legs takes leg numbers from 1, like "3" or "1 4", got '
                                  f'{args.disabled_legs!r}') from None
-        if args.waypoints and policy.metadata["task"] != "navigate":
-            raise ValueError("--waypoints is a navigate-task option; this is a goal-task policy")
+        if args.waypoints and not TASKS[policy.metadata["task"]].follows_waypoints:
+            raise ValueError(f"--waypoints need a task that follows a path; this is a {policy.metadata['task']}-task "
+                             "policy")
         env = player.env_for(policy, args.model, randomize=args.randomize, **overrides)
         if args.json:
             out = Path(args.json)

@@ -11,7 +11,7 @@ import signal
 import sys
 
 try:
-    from hexa_mjx import config, distributed, jax_setup, training
+    from hexa_mjx.training import config, distributed, jax_setup, loop as training
 except ImportError as e:  # a missing package, or a MUJOCO_GL that MuJoCo cannot use
     print(f"error: {e}", file=sys.stderr)
     sys.exit(2)

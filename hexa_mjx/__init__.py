@@ -2,6 +2,7 @@
 
 import ctypes.util
 import os
+import sys
 
 # Off-screen rendering: MuJoCo reads MUJOCO_GL when first imported. Unless the user chose, take
 # EGL, else OSMesa, whichever library is installed (evaluation explains what to install if neither).
@@ -25,15 +26,48 @@ os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "3")
 
 __all__ = ["EnvConfig", "HexapodEnv", "TASKS", "make_env"]
 
+# `python -m hexa_mjx.<name>` entry points from before the sub-packages, and where they live now.
+MOVED = {"action_noise": "evaluation.action_noise", "benchmark": "studies.benchmark",
+         "contact_check": "evaluation.contact_check", "convert": "robot.convert", "experiments": "studies.experiments",
+         "export": "deploy.export", "leg_failure": "studies.leg_failure_sweep", "plots": "evaluation.plots",
+         "soak": "studies.soak", "sweeps": "studies.robustness", "time_to_success": "studies.time_to_success",
+         "video": "evaluation.video"}
+
+
+class _MovedFinder:
+    """Finds `hexa_mjx.<old name>` as the module it moved to, so documented commands keep working."""
+
+    @staticmethod
+    def find_spec(fullname, path=None, target=None):
+        import importlib.util
+
+        package, _, name = fullname.rpartition(".")
+        if package != __name__ or name not in MOVED:
+            return None
+        spec = importlib.util.find_spec(f"{__name__}.{MOVED[name]}")
+        # Under its old name: `python -m` runs the module's code as __main__ from this spec.
+        return importlib.util.spec_from_file_location(fullname, spec.origin)
+
+
+sys.meta_path.append(_MovedFinder())
+
 
 def __getattr__(name):
-    # Loaded on first use, so that the native-MuJoCo player (hexa_mjx.native) runs without JAX.
-    if name in ("HexapodEnv", "TASKS", "make_env"):
-        from hexa_mjx import env, tasks
+    # Loaded on first use, so that the native-MuJoCo player (hexa_mjx.engines.native) runs without JAX.
+    if name == "HexapodEnv":
+        from hexa_mjx.engines.mjx_env import HexapodEnv
 
-        return {"HexapodEnv": env.HexapodEnv, "TASKS": tasks.TASKS, "make_env": tasks.make_env}[name]
+        return HexapodEnv
+    if name == "make_env":
+        from hexa_mjx.engines import make_env
+
+        return make_env
+    if name == "TASKS":
+        from hexa_mjx.tasks import TASKS
+
+        return TASKS
     if name == "EnvConfig":
-        from hexa_mjx.env_config import EnvConfig
+        from hexa_mjx.mdp.config import EnvConfig
 
         return EnvConfig
     raise AttributeError(f"module 'hexa_mjx' has no attribute {name!r}")

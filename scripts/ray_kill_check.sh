@@ -8,7 +8,7 @@ cd "$(dirname "$0")/.."
 OUT=${1:-runs/ray-kill-check}
 STEPS=${2:-163840}
 rm -rf "$OUT"
-.venv/bin/python -m hexa_mjx.experiments lr --seeds 1 --timesteps "$STEPS" --ray --run_cpus 1 --out "$OUT" \
+.venv/bin/python -m hexa_mjx.studies.experiments lr --seeds 1 --timesteps "$STEPS" --ray --run_cpus 1 --out "$OUT" \
   > "$OUT.log" 2>&1 &
 GRID=$!
 # Wait for a run that has written a checkpoint but not finished, then kill the worker training it.

@@ -52,7 +52,7 @@ ROOT = Path(__file__).resolve().parent.parent
 # A tiny rollout shape: 8 envs x 4 steps x 2 minibatches = 64 env steps per update.
 TINY = ["--num_envs", "8", "--batch_size", "8", "--num_minibatches", "2", "--unroll_length", "4",
         "--num_evals", "2", "--num_eval_envs", "2", "--episode_length", "20"]
-# The trained fixture draws start noise per episode (hexa_mjx.wrappers instead of brax's auto-reset),
+# The trained fixture draws start noise per episode (hexa_mjx.engines.wrappers instead of brax's auto-reset),
 # and trains on randomized physics with pushes: the whole path of those through brax's PPO.
 NOISE = ["--start_joint_noise", "0.05", "--start_yaw_noise", "0.1", "--randomize",
          "--push_speed", "0.3", "--push_interval", "0.1"]

@@ -7,7 +7,8 @@ import jax
 import numpy as np
 import pytest
 
-from hexa_mjx import action_noise, checkpoints, config, training
+from hexa_mjx.evaluation import action_noise
+from hexa_mjx.training import checkpoints, config, loop as training
 
 
 def test_run_noise_reads_each_checkpoints_std(tmp_path, capsys):

@@ -11,8 +11,11 @@ from pathlib import Path
 
 import pytest
 
-from hexa_mjx import config, convert, env_config, evaluation, jax_setup, training
-from hexa_mjx.tasks import make_env
+from hexa_mjx.training import config, jax_setup, loop as training
+from hexa_mjx.robot import convert
+from hexa_mjx.mdp import config as env_config
+from hexa_mjx.evaluation import evaluate as evaluation
+from hexa_mjx.engines import make_env
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))

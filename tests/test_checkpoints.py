@@ -6,7 +6,7 @@ import jax
 import numpy as np
 import pytest
 
-from hexa_mjx import checkpoints, config, optimizer_state, training
+from hexa_mjx.training import checkpoints, config, optimizer_state, loop as training
 
 
 @pytest.fixture(scope="module")

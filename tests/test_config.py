@@ -5,7 +5,9 @@ import json
 
 import pytest
 
-from hexa_mjx import config, jax_setup, time_to_success
+from hexa_mjx.training import config, jax_setup
+from hexa_mjx.studies import time_to_success
+from hexa_mjx.tasks import reward_variants
 
 
 def test_flags_and_their_negations():
@@ -81,7 +83,7 @@ def test_numeric_flags_out_of_range_are_rejected(flags, message, tmp_path):
 
 
 def test_model_flag_reaches_the_environment(tmp_path):
-    from hexa_mjx import robot
+    from hexa_mjx.robot import constants as robot
 
     copy = tmp_path / "robot.xml"  # the model references no mesh files, so a copy loads anywhere
     copy.write_text(robot.MODEL_XML.read_text())
@@ -95,6 +97,6 @@ def test_reward_scale_flag_reaches_the_environment_and_survives_the_run_config(t
     cfg = config.validate(config.parse_args(argv))
     scales = config.make_env_for(cfg).scales
     assert scales["body_contact"] == -30.0 and scales["energy"] == 0.0
-    assert scales["goal_reached"] == config.rewards.VARIANTS["navigate"]["goal_reached"]  # the rest untouched
+    assert scales["goal_reached"] == reward_variants()["navigate"]["goal_reached"]  # the rest untouched
     (tmp_path / "run" / "config.json").write_text(json.dumps(dataclasses.asdict(cfg)))
     assert config.make_env_for(config.load_config(tmp_path / "run")).scales["body_contact"] == -30.0

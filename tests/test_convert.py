@@ -7,7 +7,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from hexa_mjx import convert, robot
+from hexa_mjx.robot import convert, constants as robot
 
 
 def write_box_stl(path: Path, lo, hi, scale=1000.0):
@@ -184,8 +184,8 @@ def test_other_robot_with_a_leg_mapping_trains_on_both_engines(tmp_path):
     import jax.numpy as jp
 
     import hexa_mjx
-    from hexa_mjx.env_config import EnvConfig
-    from hexa_mjx.native import NativeEnv
+    from hexa_mjx.mdp.config import EnvConfig
+    from hexa_mjx.engines.native import NativeEnv
 
     urdf = make_toy(tmp_path, legs=4, joint_name=QUAD)
     with pytest.raises(convert.ConversionError, match="no leg joints found"):

@@ -1,4 +1,4 @@
-"""Crashes at chosen moments (a real SIGKILL through hexa_mjx.faults), each resumed: every
+"""Crashes at chosen moments (a real SIGKILL through hexa_mjx.training.crash_points), each resumed: every
 evaluation row exactly once, every checkpoint readable, no temporary folder left, and Adam's state
 carried across (the last resume runs on 2 processes: process 0 reads and shares it)."""
 
@@ -8,7 +8,7 @@ import jax
 import numpy as np
 import optax
 
-from hexa_mjx import checkpoints, config, faults, optimizer_state, ppo, training
+from hexa_mjx.training import checkpoints, config, crash_points as faults, optimizer_state, ppo, loop as training
 
 from conftest import NOISE, TINY, run
 from test_scale_out import free_port, process_flags, rows as metric_rows, train_processes

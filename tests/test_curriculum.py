@@ -7,7 +7,11 @@ import numpy as np
 import pytest
 
 import hexa_mjx
-from hexa_mjx import config, curriculum, nav_metrics, wrappers
+from hexa_mjx.training import config
+from hexa_mjx.mdp import curriculum
+from hexa_mjx.evaluation import nav_metrics
+from hexa_mjx.engines import wrappers
+from hexa_mjx.engines.mjx_env import DRAWS
 
 LEVELS = 4
 
@@ -28,7 +32,7 @@ def cur_env():
 
 
 def _bearings_and_distances(env, qpos, level, n=2000):
-    draw = jax.jit(jax.vmap(env.first_goal, in_axes=(None, 0, None)))
+    draw = jax.jit(jax.vmap(lambda q, key, lvl: env.task.first_goal(q, DRAWS, key, lvl), in_axes=(None, 0, None)))
     goals = np.asarray(draw(qpos, jax.random.split(jax.random.PRNGKey(0), n), jp.int32(level)))
     offset = goals - np.asarray(qpos[:2])
     heading = float(np.degrees(nav_metrics.heading(np.asarray(qpos)[None]))[0])

@@ -11,9 +11,12 @@ from brax.envs.wrappers import training as brax_training
 from mujoco import mjx
 
 import hexa_mjx
-from hexa_mjx import rewards, robot
-from hexa_mjx.benchmark import c_rollout, gait_actions
-from hexa_mjx.env import floor_contacts
+from hexa_mjx.mdp import rewards
+from hexa_mjx.robot import constants as robot
+from hexa_mjx.studies.benchmark import c_rollout, gait_actions
+from hexa_mjx.engines.contacts import of as floor_contacts
+from hexa_mjx.tasks import reward_variants
+from hexa_mjx.engines.mjx_env import DRAWS
 
 FLIPPED = jp.array([0.0, 1.0, 0.0, 0.0])  # 180 degrees about x: upside down
 
@@ -34,7 +37,7 @@ def test_start_pose_rests_on_feet(env, state0):
     data = state0.pipeline_state
     bad, non_foot = env.contact_counts(data)
     assert int(bad) == 0 and int(non_foot) == 0
-    geom1, geom2, dist = hexa_mjx.env.floor_contacts(data)
+    geom1, geom2, dist = floor_contacts(data)
     feet = {env.mj_model.geom(robot.foot_geom(leg)).id for leg in robot.LEGS}
     touching = {int(g) for g, d in zip(np.asarray(geom2), np.asarray(dist)) if d < 0}
     assert touching == feet  # all six feet down, nothing else
@@ -138,8 +141,11 @@ def test_goal_bonus_is_paid_only_on_feet(env, state0):
     state0 = state0.replace(pipeline_state=env.set_goal(state0.pipeline_state, jp.zeros(2)))
     def bonus(qpos):
         data = mjx.forward(env.mjx_model, state0.pipeline_state.replace(qpos=qpos))
-        no = jp.zeros((), bool)
-        return env.reward_terms(data, data, no, no)["goal_bonus"]
+        info = env.episode.start_info(DRAWS, jax.random.PRNGKey(0))
+        _, terms, _, _ = env.episode.transition(info, data.qpos, data.qpos, data.qvel, env.goal(data), env.heading(data),
+                                                env.contacts(data), data.actuator_force, jp.array(True), DRAWS,
+                                                jax.random.PRNGKey(1))
+        return terms["goal_bonus"]
     bonus = jax.jit(bonus)
     lying = np.array(env.mj_model.key_qpos[0])
     lying[2], lying[3:7] = 0.0, FLIPPED
@@ -262,7 +268,7 @@ def test_start_noise_is_drawn_per_reset(env, state0):
 
 def test_every_variant_and_ablation_builds():
     variants = [(task, reward) for task, cls in hexa_mjx.TASKS.items() for reward in cls.rewards]
-    assert sorted(r for _, r in variants) == sorted(rewards.VARIANTS)  # every variant belongs to a task
+    assert sorted(r for _, r in variants) == sorted(reward_variants())  # every variant belongs to a task
     for task, reward in variants:
         for ablation in [None, *rewards.ABLATIONS]:
             env = hexa_mjx.make_env(reward, task, ablate=() if ablation is None else ablation)
@@ -299,7 +305,7 @@ def test_bad_settings_give_clear_errors():
 
 
 def test_contact_cap_replaces_the_files_own(tmp_path):
-    from hexa_mjx.model import load_model as _load_model
+    from hexa_mjx.robot.model import load_model as _load_model
 
     path = tmp_path / "capped.xml"  # the model references no mesh files, so a copy loads anywhere
     path.write_text(robot.MODEL_XML.read_text().replace(
@@ -310,7 +316,7 @@ def test_contact_cap_replaces_the_files_own(tmp_path):
 
 
 def test_a_failed_leg_gives_no_torque_and_the_policy_is_not_told(env):
-    from hexa_mjx.native import NativeEnv
+    from hexa_mjx.engines.native import NativeEnv
 
     limp = hexa_mjx.make_env(disabled_legs=(3,))
     state = jax.jit(limp.reset)(jax.random.PRNGKey(0))
@@ -348,7 +354,7 @@ def test_random_leg_failure_is_drawn_per_episode():
 
 
 def test_leg_failure_weights_pick_the_failed_leg_in_both_engines():
-    from hexa_mjx.native import NativeEnv
+    from hexa_mjx.engines.native import NativeEnv
     weights = (0, 0, 3, 1, 0, 0)  # legs 3 and 4 only, 3 three times as often
     env = hexa_mjx.make_env(leg_failure="random", leg_failure_rate=1.0, leg_failure_weights=weights)
     mjx_counts = np.asarray(jax.jit(jax.vmap(env.draw_failure))(jax.random.split(jax.random.PRNGKey(0), 2000))).sum(0)
@@ -356,7 +362,7 @@ def test_leg_failure_weights_pick_the_failed_leg_in_both_engines():
     native_counts = np.zeros(6)
     for seed in range(400):
         native.reset(seed=seed)
-        native_counts += native.failed_legs
+        native_counts += native.info["failed_legs"]
     for counts in (mjx_counts, native_counts):
         assert counts[[0, 1, 4, 5]].sum() == 0 and counts.sum() > 0
         assert 2.4 < counts[2] / counts[3] < 3.8, counts

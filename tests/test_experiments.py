@@ -7,7 +7,7 @@ import json
 import matplotlib.image as mpimg
 import pytest
 
-from hexa_mjx import experiments, study_results
+from hexa_mjx.studies import experiments, study_results
 
 
 def test_grids_match_the_report(tmp_path):

@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 import hexa_mjx
-from hexa_mjx import failure_schedule as fs
-from hexa_mjx import training, wrappers
-from hexa_mjx.config import ConfigError, parse_args, validate
+from hexa_mjx.mdp import failure_schedule as fs
+from hexa_mjx.training import loop as training
+from hexa_mjx.engines import wrappers
+from hexa_mjx.training.config import ConfigError, parse_args, validate
 
 BATCH, EPISODE = 6, 4
 
@@ -97,7 +98,7 @@ def test_bad_schedules_are_refused_before_compiling(flags, message, tmp_path):
 
 
 def test_the_schedule_is_logged_in_the_runs_rows(tmp_path):
-    from hexa_mjx.progress import Logger
+    from hexa_mjx.training.progress import Logger
 
     cfg = parse_args(["--leg_failure", "random", "--leg_failure_adaptive", "--run_dir", str(tmp_path)])
     logger = Logger(tmp_path, cfg, 0)

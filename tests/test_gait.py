@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from hexa_mjx import gait
+from hexa_mjx.evaluation import gait
 
 DT = 1 / 60  # s
 

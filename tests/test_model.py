@@ -4,8 +4,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from hexa_mjx import convert, robot
-from hexa_mjx.benchmark import solver_error
+from hexa_mjx.robot import convert, constants as robot
+from hexa_mjx.studies.benchmark import solver_error
 
 
 @pytest.fixture(scope="module")
@@ -59,4 +59,4 @@ def test_fast_solver_stays_close_to_tight_solver(env):
 @pytest.mark.skipif(not robot.SEED_URDF.is_file(), reason=f"reference robot {robot.SEED_URDF} absent (../shared)")
 def test_committed_model_is_converter_output():
     assert convert.convert(robot.SEED_URDF) == robot.MODEL_XML.read_text(), (
-        "models/hexapod.xml is stale: run `python -m hexa_mjx.convert ../shared/robots/seed_hexapod/hexapod.urdf`")
+        "models/hexapod.xml is stale: run `python -m hexa_mjx.robot.convert ../shared/robots/seed_hexapod/hexapod.urdf`")

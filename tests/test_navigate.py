@@ -6,8 +6,11 @@ import numpy as np
 import pytest
 
 import hexa_mjx
-from hexa_mjx import nav_metrics, rewards
-from hexa_mjx.kinematics import quat_mul, rotate, yaw
+from hexa_mjx.evaluation import nav_metrics
+from hexa_mjx.mdp import rewards
+from hexa_mjx.robot.kinematics import quat_mul, rotate, yaw
+from hexa_mjx.engines.mjx_env import DRAWS
+from hexa_mjx.tasks import reward_variants
 
 
 def _yaw_quat(angle):
@@ -17,7 +20,7 @@ def _yaw_quat(angle):
 def test_sizes_and_reward_table(nav_env):
     assert (nav_env.observation_size, nav_env.action_size) == (67, 18)
     assert nav_env.config.reward == "navigate" and nav_env.scales["goal_reached"] > 0
-    report = rewards.VARIANTS["goal_directed"]
+    report = reward_variants()["goal_directed"]
     for term in ("stability", "height", "energy", "contact_quality", "termination"):
         assert nav_env.scales[term] == report[term]  # shaping shared with the report
     assert nav_env.scales["body_contact"] < report["body_contact"] < 0  # the same term, weighted more
@@ -114,10 +117,11 @@ def test_waypoints_are_followed_in_order_and_the_last_stays():
     start = np.asarray(env.qpos0[:2])
     data = jax.jit(env.restart)(jax.jit(env.reset)(jax.random.PRNGKey(0)).pipeline_state, jax.random.PRNGKey(1))
     np.testing.assert_allclose(env.goal(data), start + [0.3, 0.0], atol=1e-6)
-    np.testing.assert_allclose(env.next_goal(data, jp.int32(1), jax.random.PRNGKey(2)), start + [1.0, 0.0])
-    np.testing.assert_allclose(env.next_goal(data, jp.int32(2), jax.random.PRNGKey(2)), start + [1.0, 0.0])
-    assert bool(env.goal_completed(jp.array(True), jp.int32(1)))
-    assert not bool(env.goal_completed(jp.array(True), jp.int32(2)))  # the path is done
+    for done in (1, 2):  # after the first waypoint, and once the path is done
+        goal = env.task.next_goal(data.qpos, env.goal(data), jp.int32(done), DRAWS, jax.random.PRNGKey(2))
+        np.testing.assert_allclose(goal, start + [1.0, 0.0])
+    assert bool(env.task.goal_completed(jp.array(True), jp.int32(1)))
+    assert not bool(env.task.goal_completed(jp.array(True), jp.int32(2)))  # the path is done
 
 
 @pytest.mark.parametrize("overrides, message", [

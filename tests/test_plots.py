@@ -5,7 +5,7 @@ import json
 import matplotlib.image as mpimg
 import pytest
 
-from hexa_mjx import plots
+from hexa_mjx.evaluation import plots
 
 
 def test_plot_runs_writes_png(tmp_path):

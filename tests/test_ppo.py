@@ -1,11 +1,11 @@
-"""hexa_mjx.ppo runs brax's PPO: the same params as brax's `ppo.train` from the same seed, with the
+"""hexa_mjx.training.ppo runs brax's PPO: the same params as brax's `ppo.train` from the same seed, with the
 host called back between updates instead of from inside the program."""
 
 import jax
 import numpy as np
 import pytest
 
-from hexa_mjx import config, ppo, training
+from hexa_mjx.training import config, ppo, loop as training
 
 # A tiny rollout (8 envs x 4 steps x 2 minibatches = 64 env steps per update), two intervals of two
 # updates, start noise drawn per episode (hexa_mjx's wrappers), two epochs of SGD, small networks.

@@ -7,8 +7,11 @@ import numpy as np
 import pytest
 
 import hexa_mjx
-from hexa_mjx import randomization, wrappers
-from hexa_mjx.benchmark import gait_actions
+from hexa_mjx.mdp import randomization
+from hexa_mjx.engines import wrappers
+from hexa_mjx.studies.benchmark import gait_actions
+from hexa_mjx.mdp import events
+from hexa_mjx.engines.mjx_env import DRAWS
 
 N = 64
 
@@ -109,7 +112,7 @@ def test_derived_constants_must_be_recomputed(env):
 
 def test_pushes_kick_the_torso_at_the_interval():
     env = hexa_mjx.make_env(push_speed=1.0, push_interval=0.1)  # every 6 control steps
-    kick = jax.jit(env.push_kick)
+    kick = jax.jit(lambda t, key: events.push_kick(t, env.episode.push_every, env.config.push_speed, DRAWS, key))
     keys = jax.random.split(jax.random.PRNGKey(0), 200)
     assert all(float(jp.linalg.norm(kick(t, keys[0]))) == 0 for t in (0, 1, 5, 7))
     speeds = np.array([float(jp.linalg.norm(kick(jp.int32(6), k))) for k in keys])
@@ -119,8 +122,8 @@ def test_pushes_kick_the_torso_at_the_interval():
 
 
 def test_native_engine_draws_a_variant_every_episode():
-    from hexa_mjx.env_config import EnvConfig
-    from hexa_mjx.native import NativeEnv
+    from hexa_mjx.mdp.config import EnvConfig
+    from hexa_mjx.engines.native import NativeEnv
 
     native = NativeEnv(EnvConfig(), ranges=randomization.Ranges())
     nominal = native.nominal
@@ -151,12 +154,13 @@ def test_a_late_command_leaves_the_previous_one_acting(env, step, state0):
 
 
 def test_observation_noise_touches_only_sensor_values():
-    from hexa_mjx.observations import noise_scale
+    from hexa_mjx.mdp.observations import noise_scale
+    from hexa_mjx.tasks import TASKS
 
     noisy = hexa_mjx.make_env(obs_noise=1.0)
     state = jax.jit(noisy.reset)(jax.random.PRNGKey(0))
     diff = np.asarray(state.obs - noisy.observe(state.pipeline_state))
-    scale = noise_scale("goal", 18)
+    scale = noise_scale(TASKS["goal"].layout(18))
     assert np.all(np.abs(diff) <= scale + 1e-6) and np.all(diff[scale == 0] == 0)
     assert np.abs(diff[31:49]).max() > 0.3  # joint velocities: +-1.5 rad/s
 
@@ -164,7 +168,7 @@ def test_observation_noise_touches_only_sensor_values():
 def test_eval_rollout_runs_each_episode_on_its_own_model():
     """eval.py --randomize: episodes from the same start (the report task's), with the same (zero)
     commands, part ways only because each has its own physics (here only its payload differs)."""
-    from hexa_mjx import evaluation
+    from hexa_mjx.evaluation import evaluate as evaluation
 
     env = hexa_mjx.make_env(episode_length=30)
     hold = lambda obs, key: jp.zeros((obs.shape[0], env.action_size))  # noqa: E731

@@ -4,11 +4,14 @@ import jax.numpy as jp
 import numpy as np
 import pytest
 
-from hexa_mjx import rewards
+from hexa_mjx.mdp import rewards
+from hexa_mjx.tasks import reward_variants
+
+VARIANTS = reward_variants()
 
 
 def scaled(term, *args, reward="goal_directed"):
-    return rewards.VARIANTS[reward][term] * float(rewards.TERMS[term](*args))
+    return VARIANTS[reward][term] * float(rewards.TERMS[term](*args))
 
 
 def test_one_cm_toward_goal_gives_ten():
@@ -52,9 +55,9 @@ def test_idle_feet_counts_working_feet_up_longer_than_the_limit():
     assert float(rewards.idle_feet(air, jp.ones(6))) == 3.0  # legs 2, 4 and 5
     failed_leg_4 = jp.asarray([1.0, 1.0, 1.0, 0.0, 1.0, 1.0])  # a limp leg's foot is not the policy's
     assert float(rewards.idle_feet(air, failed_leg_4)) == 2.0
-    assert rewards.make_scales("navigate")["idle_feet"] == 0.0  # off unless asked for
-    assert rewards.make_scales("navigate")["low_duty"] == 0.0
-    assert rewards.make_scales("navigate", overrides={"idle_feet": -5})["idle_feet"] == -5.0
+    assert rewards.make_scales(VARIANTS["navigate"])["idle_feet"] == 0.0  # off unless asked for
+    assert rewards.make_scales(VARIANTS["navigate"])["low_duty"] == 0.0
+    assert rewards.make_scales(VARIANTS["navigate"], overrides={"idle_feet": -5})["idle_feet"] == -5.0
 
 
 def test_low_duty_is_each_working_feet_shortfall_below_the_minimum_share():
@@ -79,30 +82,30 @@ def test_forward_motion_terms():
 
 
 def test_variants_differ_only_in_task_terms():
-    goal, forward = rewards.VARIANTS["goal_directed"], rewards.VARIANTS["forward_motion"]
-    assert set(goal) == set(forward) == set(rewards.VARIANTS["navigate"]) == set(rewards.TERMS)
-    navigate = rewards.VARIANTS["navigate"]
+    goal, forward = VARIANTS["goal_directed"], VARIANTS["forward_motion"]
+    assert set(goal) == set(forward) == set(VARIANTS["navigate"]) == set(rewards.TERMS)
+    navigate = VARIANTS["navigate"]
     assert {k for k in goal if goal[k] != navigate[k]} == {"goal_reached", "body_contact"}
     differing = {k for k in goal if goal[k] != forward[k]}
     assert differing == {"goal_approach", "velocity_alignment", "goal_bonus", "forward_progress", "forward_velocity"}
     assert forward["goal_bonus"] == 0.0
 
 
-@pytest.mark.parametrize("reward", sorted(rewards.VARIANTS))
+@pytest.mark.parametrize("reward", sorted(VARIANTS))
 @pytest.mark.parametrize("ablation", sorted(rewards.ABLATIONS))
 def test_ablation_zeroes_exactly_its_terms(reward, ablation):
-    full = rewards.make_scales(reward)
-    ablated = rewards.make_scales(reward, ablate=[ablation])
+    full = rewards.make_scales(VARIANTS[reward])
+    ablated = rewards.make_scales(VARIANTS[reward], ablate=[ablation])
     for term in full:
         expected = 0.0 if term in rewards.ABLATIONS[ablation] else full[term]
         assert ablated[term] == expected, term
 
 
 def test_scale_overrides_and_errors():
-    assert rewards.make_scales("goal_directed", overrides={"height": -5})["height"] == -5.0
-    with pytest.raises(ValueError, match="unknown reward 'sideways'"):
-        rewards.make_scales("sideways")
+    report = VARIANTS["goal_directed"]
+    assert rewards.make_scales(report, overrides={"height": -5})["height"] == -5.0
     with pytest.raises(ValueError, match="unknown ablation 'legs'"):
-        rewards.make_scales("goal_directed", ablate=["legs"])
+        rewards.make_scales(report, ablate=["legs"])
     with pytest.raises(ValueError, match="unknown reward term 'speed'"):
-        rewards.make_scales("goal_directed", overrides={"speed": 1.0})
+        rewards.make_scales(report, overrides={"speed": 1.0})
+    assert rewards.make_scales(report, overrides={"speed": 1.0}, extra_terms=("speed",))["speed"] == 1.0

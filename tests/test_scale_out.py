@@ -10,7 +10,8 @@ import time
 
 import pytest
 
-from hexa_mjx import config, distributed, experiments, jax_setup, ray_runs
+from hexa_mjx.training import config, distributed, jax_setup
+from hexa_mjx.studies import experiments, ray_runs
 
 from conftest import ROOT
 

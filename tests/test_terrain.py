@@ -5,9 +5,9 @@ import mujoco
 import numpy as np
 import pytest
 
-from hexa_mjx import terrain
-from hexa_mjx.env_config import make_config
-from hexa_mjx.model import RobotModel
+from hexa_mjx.mdp import terrain
+from hexa_mjx.mdp.config import make_config
+from hexa_mjx.robot.model import RobotModel
 
 
 @pytest.fixture(scope="module", params=["bumps", "slopes", "steps", "mixed"])
@@ -89,7 +89,7 @@ def test_lifted_foot_is_measured_from_the_ground_under_it(robot_on):
 
 
 def test_height_term_reads_the_ground_under_the_torso():
-    from hexa_mjx import rewards
+    from hexa_mjx.mdp import rewards
 
     config = make_config(terrain="slopes")
     qpos = np.zeros(25)
@@ -159,7 +159,7 @@ def test_native_heightfield_gives_a_sphere_near_a_cell_edge_a_side_contact():
     sphere 5 mm deep and 8 mm from a cell's edge also touches the neighbouring prism's side."""
     import mujoco
 
-    from hexa_mjx.contact_check import main, native_tilts
+    from hexa_mjx.evaluation.contact_check import main, native_tilts
 
     radius, depth = 0.012, 0.005  # m: the robot's foot sphere, a typical penetration
     m = mujoco.MjModel.from_xml_string(f"""<mujoco><asset><hfield name="h" nrow="3" ncol="3" size="0.1 0.1 0.05 0.1"/>

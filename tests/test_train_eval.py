@@ -14,7 +14,8 @@ import jax
 import numpy as np
 import pytest
 
-from hexa_mjx import checkpoints, config, evaluation, training, video
+from hexa_mjx.training import checkpoints, config, loop as training
+from hexa_mjx.evaluation import evaluate as evaluation, video
 
 from conftest import NOISE, TINY, run  # noqa: E402  (the shared tiny run: tests/conftest.py)
 
@@ -41,7 +42,7 @@ def test_train_writes_run_directory(trained):
 
 
 def test_training_program_is_compiled_once_and_kept_in_the_cache(trained, cache_env):
-    """hexa_mjx.ppo's update has no host callback, so JAX's cache keeps it (brax's training epoch,
+    """hexa_mjx.training.ppo's update has no host callback, so JAX's cache keeps it (brax's training epoch,
     with the progress line's and Adam's callbacks, was compiled afresh by every run)."""
     _, proc = trained
     assert proc.stderr.count("Compiling update (") == 1, proc.stderr[-3000:]
@@ -196,7 +197,7 @@ def test_episode_table_phases_average_over_episodes_that_have_them():
 
 
 def test_contact_groups(env):
-    from hexa_mjx import robot
+    from hexa_mjx.robot import constants as robot
 
     m, groups = env.mj_model, evaluation.contact_groups(env)
     assert groups[m.geom(robot.TORSO_GEOM).id] == 0 and groups[m.geom(robot.FLOOR_GEOM).id] == 0
@@ -240,13 +241,13 @@ def test_missing_opengl_names_the_package(env, monkeypatch, tmp_path):
         video.render_video(env, np.zeros((2, env.mj_model.nq)), tmp_path / "x.mp4", np.zeros((2, 2)))
 
 
-def test_a_policy_runs_only_where_its_observation_exists():
+def test_a_policy_runs_on_another_tasks_goals_with_its_own_observation():
     goal_run = config.TrainConfig()
     baseline = config.make_env_for(goal_run, task="navigate")  # the report's policy on navigation goals
     assert baseline.name == "navigate" and baseline.observation_size == 52
     nav_run = config.TrainConfig(task="navigate", reward="navigate", goal_max_distance=2.0)
-    with pytest.raises(ValueError, match="navigate policy; it cannot be run on the goal task"):
-        config.make_env_for(nav_run, task="goal")
+    on_report_goals = config.make_env_for(nav_run, task="goal")  # its own observation, on the report's goal
+    assert on_report_goals.name == "goal" and on_report_goals.observation_size == 67
     far = config.make_env_for(nav_run, goal_min_distance=4.0, goal_max_distance=4.0)
     assert far.config.goal_distance_cap == 2.0  # the policy keeps the distance cap it trained with
 

@@ -6,7 +6,7 @@ import jax.numpy as jp
 import numpy as np
 from brax.envs.base import Env, State
 
-from hexa_mjx import wrappers
+from hexa_mjx.engines import wrappers
 
 
 class Toy(Env):
@@ -61,7 +61,7 @@ def test_every_episode_starts_from_a_fresh_draw():
 
 def test_zero_noise_uses_brax_wrappers():
     import hexa_mjx
-    from hexa_mjx import training
+    from hexa_mjx.training import loop as training
 
     assert training.wrap_env_fn(hexa_mjx.make_env()) is None  # the report's fixed start
     assert training.wrap_env_fn(hexa_mjx.make_env(start_yaw_noise=0.1)) is wrappers.wrap_for_training
@@ -90,7 +90,7 @@ def test_returns_are_tracked_on_brax_auto_reset_too():
     import hexa_mjx
     from brax.envs.wrappers import training as brax_training
 
-    from hexa_mjx import training
+    from hexa_mjx.training import loop as training
 
     wrap = training.wrap_env_fn(hexa_mjx.make_env(), track_returns=True)  # fixed start: brax's auto-reset
     env = wrap(hexa_mjx.make_env(), episode_length=10)

@@ -1,32 +1,33 @@
-"""Tasks: what the hexapod is asked to do. Each is a small `HexapodEnv` subclass in its own module.
+"""The task registry: the one place that lists tasks.
 
-    make_env()                    # the report's task: one goal 1.5 m ahead
-    make_env(task="navigate")     # goals in every direction at 0.5 to 3 m, chained
+Each task is one module here with one `Task` subclass (`hexa_mjx.tasks.base`), run as it is by
+both engines, eval.py, play.py, export and Gymnasium. To add a task, write its module (stand.py is
+the smallest example) and add its class to TASKS below.
 """
 
 from __future__ import annotations
 
-from hexa_mjx.env import HexapodEnv
-from hexa_mjx.env_config import make_config
-from hexa_mjx.tasks.goal import GoalEnv
-from hexa_mjx.tasks.navigate import NavigateEnv
+from hexa_mjx.tasks.base import Task
+from hexa_mjx.tasks.goal import GoalTask
+from hexa_mjx.tasks.navigate import NavigateTask
+from hexa_mjx.tasks.stand import StandTask
 
-TASKS: dict[str, type[HexapodEnv]] = {cls.name: cls for cls in (GoalEnv, NavigateEnv)}
+TASKS: dict[str, type[Task]] = {cls.name: cls for cls in (GoalTask, NavigateTask, StandTask)}
+DEFAULT_TASK = GoalTask.name  # the report's task
 
 
-def task_class(task: str) -> type[HexapodEnv]:
+def task_class(task: str) -> type[Task]:
+    """The task registered as `task`; a clear error for an unknown name."""
     if task not in TASKS:
         raise ValueError(f"unknown task {task!r}; choose one of {sorted(TASKS)}")
     return TASKS[task]
 
 
-def make_env(reward: str = "", task: str = "goal", observe_as: str = "", **overrides) -> HexapodEnv:
-    """Build a task's environment; `reward` picks one of its reward variants ("": its own), keyword
-    overrides set `EnvConfig` fields. `observe_as` names another task whose observation the policy
-    sees, to run that task's policy on these goals (the report's policy on navigation goals)."""
-    config = make_config(task, reward, **overrides)
-    cls = task_class(task)
-    if observe_as and observe_as != task:
-        cls = type(f"{cls.__name__}Observed{task_class(observe_as).__name__}", (cls,),
-                   {"observe": task_class(observe_as).observe, "observe_task": observe_as})
-    return cls(config)
+def default_reward(task: str) -> str:
+    """The task's own reward variant (its first)."""
+    return next(iter(task_class(task).rewards))
+
+
+def reward_variants() -> dict[str, dict[str, float]]:
+    """Every task's reward variants: name -> scales table."""
+    return {name: table for cls in TASKS.values() for name, table in cls.rewards.items()}

@@ -1,63 +1,116 @@
 """Navigation: random headings, goals in every direction at any range, chained, or a waypoint path.
 
 The observation is in the robot's heading frame (x forward, y left, z up, turned by the torso's
-yaw only), so a policy sees the same thing whichever way it faces (README, "Navigation task").
+yaw only), so a policy sees the same thing whichever way it faces (docs/TASKS.md).
 """
 
 from __future__ import annotations
 
-import jax
-import jax.numpy as jp
 import numpy as np
-from mujoco import mjx
 
-from hexa_mjx.curriculum import range_fraction
-from hexa_mjx.env import HexapodEnv
-from hexa_mjx.kinematics import yaw
-from hexa_mjx.observations import navigate_observation
-from hexa_mjx.rewards import TASK_REWARDS
+from hexa_mjx.mdp import curriculum, observations, rewards
+from hexa_mjx.robot.kinematics import namespace, yaw
+from hexa_mjx.tasks.base import Task
 
-class NavigateEnv(HexapodEnv):
+
+class NavigateTask(Task):
     """Goals at a uniform bearing and distance; on arrival the next one is drawn."""
 
     name = "navigate"
-    rewards = TASK_REWARDS["navigate"]
-    start_yaw_range = np.pi  # every episode starts from a heading uniform over 360 degrees
+    gym_id = "hexa_mjx/HexapodNavigate-v0"
+    summary = "goals in every direction at 0.5 to 3 m, chained, or a waypoint path"
+    # The report's goal terms toward the current goal, whose radius it leaves at once (so the
+    # in-radius bonus is paid on the arrival step), plus a one-off bonus per goal reached. Body
+    # contact weighs 10x the report's: walking at ~1 m/s earns ~27 per step, and at -1 a policy
+    # kept its shins on the floor in 1.8% of steps (docs/RESULTS.md, navigation).
+    rewards = {"navigate": {**rewards.GOAL_TERMS, "goal_reached": 400.0, **rewards.SHAPING, "body_contact": -10.0}}
+    gait_window = "alive"  # the whole episode is walking
+    follows_waypoints = True
 
-    def first_goal(self, qpos: jax.Array, rng: jax.Array, level=0) -> jax.Array:
-        if self.config.waypoints:
-            return self._waypoint(0)
-        return self._draw_goal(qpos, rng, level)
+    @classmethod
+    def check(cls, config) -> None:
+        if config.curriculum_levels and config.waypoints:
+            raise ValueError("curriculum_levels applies to the navigate task's random goals only; leave it at 0 "
+                             "with waypoints")
 
-    def goal_completed(self, reached: jax.Array, goals: jax.Array) -> jax.Array:
-        if self.config.waypoints:  # the last waypoint, once reached, stays the goal
-            return reached & (goals < len(self.config.waypoints))
-        return reached
-
-    def next_goal(self, data: mjx.Data, goals: jax.Array, rng: jax.Array, level=0) -> jax.Array:
-        if self.config.waypoints:
-            return self._waypoint(jp.minimum(goals, len(self.config.waypoints) - 1))
-        return self._draw_goal(data.qpos, rng, level)
-
-    def observe(self, data: mjx.Data) -> jax.Array:
-        """67 values, heading frame (hexa_mjx.observations.layout)."""
-        return navigate_observation(data.qpos, data.qvel, data.ctrl, self.goal(data), self.robot.ctrl_lo,
-                                    self.robot.ctrl_hi, self.distance_cap)
+    @property
+    def start_yaw_range(self) -> float:
+        return np.pi  # every episode starts from a heading uniform over 360 degrees
 
     @property
     def distance_cap(self) -> float:
         """m, the largest goal distance the policy observes (the trained range's end by default)."""
         return self.config.goal_distance_cap or self.config.goal_max_distance
 
-    def _draw_goal(self, qpos: jax.Array, rng: jax.Array, level) -> jax.Array:
+    def first_goal(self, qpos, draws, key, level=0):
+        if self.config.waypoints:
+            return self._waypoint(qpos, 0)
+        return self._draw_goal(qpos, draws, key, level)
+
+    def goal_completed(self, reached, goals):
+        if self.config.waypoints:  # the last waypoint, once reached, stays the goal
+            return reached & (goals < len(self.config.waypoints))
+        return reached
+
+    def next_goal(self, qpos, goal, goals, draws, key, level=0):
+        if self.config.waypoints:
+            return self._waypoint(qpos, namespace(qpos).minimum(goals, len(self.config.waypoints) - 1))
+        return self._draw_goal(qpos, draws, key, level)
+
+    def observe(self, qpos, qvel, ctrl, goal, heading):
+        return observations.navigate_observation(qpos, qvel, ctrl, goal, self.robot.ctrl_lo, self.robot.ctrl_hi,
+                                                 self.distance_cap)
+
+    @classmethod
+    def layout(cls, joints):
+        return observations.slices([
+            ("goal direction (x, y), heading frame, unit vector", "", 2),
+            ("goal distance, capped at the trained range's end", "m", 1), ("torso height", "m", 1),
+            *observations.proprioception_slices(joints)])
+
+    def deployment_settings(self) -> dict:
+        return {"goal_distance_cap": self.distance_cap}  # the policy keeps the cap it was trained with
+
+    def _draw_goal(self, qpos, draws, key, level):
         """A goal at a bearing from the torso's heading and a distance drawn over the ranges open at
         the curriculum's `level` (the full ranges without a curriculum)."""
-        k_bearing, k_dist = jax.random.split(rng)
-        open_share = range_fraction(level, self.config.curriculum_levels)
-        bearing = yaw(qpos[3:7]) + open_share * jax.random.uniform(k_bearing, minval=-jp.pi, maxval=jp.pi)
+        xp = namespace(qpos)
+        k_bearing, k_dist = draws.split(key)
+        open_share = curriculum.range_fraction(level, self.config.curriculum_levels)
+        bearing = yaw(qpos[3:7]) + open_share * draws.uniform(k_bearing, (), -np.pi, np.pi)
         near, far = self.config.goal_min_distance, self.config.goal_max_distance
-        dist = jax.random.uniform(k_dist, minval=near, maxval=near + open_share * (far - near))
-        return qpos[:2] + dist * jp.stack([jp.cos(bearing), jp.sin(bearing)])
+        dist = draws.uniform(k_dist, (), near, near + open_share * (far - near))
+        return qpos[:2] + dist * xp.stack([xp.cos(bearing), xp.sin(bearing)])
 
-    def _waypoint(self, index) -> jax.Array:
-        return self._start_xy + jp.asarray(self.config.waypoints, jp.float32)[index]
+    def _waypoint(self, qpos, index):
+        xp = namespace(qpos)
+        return xp.asarray(self.robot.start_xy, xp.float32) + xp.asarray(self.config.waypoints, xp.float32)[index]
+
+    # -- figures --------------------------------------------------------------
+
+    @classmethod
+    def progress_figure(cls, row: dict) -> str:
+        return f"goals {row['goals_per_episode']:.2f}"
+
+    def evaluation_settings(self) -> dict:
+        return {"goal_min_distance": self.config.goal_min_distance, "goal_max_distance": self.config.goal_max_distance,
+                "waypoints": [list(p) for p in self.config.waypoints]}
+
+    def evaluation(self, env, start_qpos, traj, alive, fell):
+        from hexa_mjx.evaluation import nav_metrics  # evaluation-only figures
+
+        args = (start_qpos, traj["qpos"], traj["goals_reached"], alive, np.asarray(fell))
+        if self.config.waypoints:
+            path = nav_metrics.waypoint_summary(*args, self.config.waypoints, env.dt)
+            return {"waypoints": path}, {"waypoints": path.pop("per_episode")}
+        records = nav_metrics.goals_of_episodes(start_qpos, traj["qpos"], traj["goal"], traj["goals_reached"],
+                                                alive, fell, env.dt)
+        summary = nav_metrics.navigation_summary(records, alive.shape[1], self.config.success_radius,
+                                                 nav_metrics.body_length(env), self.config.goal_min_distance,
+                                                 self.config.goal_max_distance)
+        return {"navigation": summary}, {"goals": records}
+
+    def plot(self, env, start_qpos, traj, out):
+        from hexa_mjx.evaluation import plots
+
+        return plots.plot_tracks(env, start_qpos, traj, out / "paths.png")

@@ -1,0 +1,198 @@
+"""Run an exported ONNX policy on native MuJoCo: episodes, per-episode results, video, viewer.
+
+This path imports only mujoco, onnxruntime and NumPy (imageio to encode a video): the shape of a
+deployment. `play.py` is its command-line face.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+from pathlib import Path
+
+import numpy as np
+
+from hexa_mjx.mdp import randomization
+from hexa_mjx.mdp.config import EnvConfig, make_config
+from hexa_mjx.deploy.export import FORMAT, METADATA_KEY
+from hexa_mjx.engines.native import NativeEnv
+from hexa_mjx.tasks import TASKS
+
+
+class OnnxPolicy:
+    """An exported policy: observation (n,) or (batch, n) float32 -> action in [-1, 1]."""
+
+    def __init__(self, path: str | Path, threads: int = 1):
+        import onnxruntime as ort
+
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"policy {path} not found")
+        options = ort.SessionOptions()
+        options.intra_op_num_threads = options.inter_op_num_threads = threads
+        try:
+            self.session = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+        except Exception as e:  # onnxruntime raises its own exception types for unreadable files
+            raise ValueError(f"{path} is not a readable ONNX model ({str(e)[:160]})") from e
+        meta = self.session.get_modelmeta().custom_metadata_map
+        if METADATA_KEY not in meta:
+            raise ValueError(f"{path} has no hexa_mjx metadata: export a run with `python -m hexa_mjx.deploy.export RUN -o FILE`")
+        self.metadata = json.loads(meta[METADATA_KEY])
+        if self.metadata.get("format") != FORMAT:
+            raise ValueError(f"{path} was exported in metadata format {self.metadata.get('format')}; this version "
+                             f"reads format {FORMAT}: re-export it with `python -m hexa_mjx.deploy.export`")
+        inputs, outputs = self.session.get_inputs(), self.session.get_outputs()
+        shape_in, shape_out = inputs[0].shape[-1], outputs[0].shape[-1]
+        if (len(inputs), len(outputs)) != (1, 1) or (shape_in, shape_out) != (
+                self.metadata["observation_size"], self.metadata["action_size"]):
+            raise ValueError(f"{path}: its graph maps {shape_in} -> {shape_out} values but its metadata says "
+                             f"{self.metadata['observation_size']} -> {self.metadata['action_size']}; re-export it")
+        self.path, self.input = path, inputs[0].name
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        obs = np.asarray(obs, np.float32)
+        return self.session.run(None, {self.input: obs.reshape(-1, obs.shape[-1])})[0].reshape(
+            obs.shape[:-1] + (-1,))
+
+
+def env_for(policy: OnnxPolicy, model_path: str | Path | None = None, randomize: bool = False,
+            **overrides) -> NativeEnv:
+    """The native environment a policy was trained on, with `EnvConfig` overrides (goal range,
+    waypoints, episode length...) and, with `randomize`, randomized physics every episode; checks
+    that the model's joints and observation match the policy."""
+    meta = policy.metadata
+    task = meta["env_config"].get("task")
+    if task not in TASKS:
+        raise ValueError(f"{policy.path} is a policy for task {task!r}; this version knows {list(TASKS)}")
+    size = TASKS[task].layout(meta["action_size"])[-1][1]
+    if size != meta["observation_size"]:
+        raise ValueError(f"the {task} task observes {size} values, the policy {policy.path} "
+                         f"expects {meta['observation_size']}: it was exported for another task or version")
+    settings = {**meta["env_config"], **{k: v for k, v in overrides.items() if v is not None}}
+    if model_path is not None:
+        settings["model_path"] = str(model_path)
+    known = {f.name for f in dataclasses.fields(EnvConfig)}  # a newer export's extra settings are ignored
+    env = NativeEnv(make_config(**{k: v for k, v in settings.items() if k in known}),
+                    ranges=randomization.Ranges() if randomize else None)
+    joints = env.robot.actuator_joints
+    if joints != meta["joint_order"]:
+        raise ValueError(f"the model {env.config.model_path} drives joints {joints}, but the policy "
+                         f"{policy.path} was trained on {meta['joint_order']}; pass the model it was trained on "
+                         f"(--model .../{meta['model']['file']})")
+    return env
+
+
+def model_matches(policy: OnnxPolicy, env: NativeEnv) -> bool:
+    """Whether the model file is byte-for-byte the one the policy was trained on."""
+    return hashlib.sha256(Path(env.config.model_path).read_bytes()).hexdigest() == policy.metadata["model"]["sha256"]
+
+
+def run_episode(policy: OnnxPolicy, env: NativeEnv, seed: int, record: bool = False) -> dict:
+    """One deterministic episode from the start drawn by `seed`; `record` keeps qpos and goal per step."""
+    obs = env.reset(seed=seed)
+    start_goal_dist = env.goal_distance()
+    qpos, goals = [env.data.qpos.copy()], [env.goal]
+    total, feet_only, steps, first_arrival = 0.0, 0, 0, None
+    while True:
+        obs, reward, terminated, truncated, info = env.step(policy(obs))
+        total += reward
+        steps += 1
+        feet_only += info["feet_only"]
+        if info["success"] and first_arrival is None:
+            first_arrival = steps * env.dt
+        if record:
+            qpos.append(env.data.qpos.copy())
+            goals.append(env.goal)
+        if terminated or truncated:
+            break
+    result = {"seed": seed, "success": bool(info["success"]), "final_distance": info["distance"],
+              "fell": info["fell"], "nonfinite": info["nonfinite"], "goals_reached": info["goals_reached"],
+              "steps": steps, "return": total, "feet_only_share": feet_only / steps,
+              "first_arrival_s": first_arrival, "first_goal_distance": start_goal_dist}
+    if record:
+        result["trajectory"] = {"qpos": np.array(qpos), "goal": np.array(goals)}
+    return result
+
+
+def summarize(episodes: list[dict]) -> dict:
+    """Rates and means over episodes."""
+    def mean(key):
+        return float(np.mean([e[key] for e in episodes]))
+
+    arrivals = [e["first_arrival_s"] for e in episodes if e["first_arrival_s"] is not None]
+    # Speed to the first goal: its start distance over the time to first enter the radius, m/s.
+    speeds = [e["first_goal_distance"] / e["first_arrival_s"] for e in episodes if e["first_arrival_s"]]
+    return {"episodes": len(episodes), "success_rate": mean("success"), "fall_rate": mean("fell"),
+            "nonfinite_rate": mean("nonfinite"), "final_distance_mean": mean("final_distance"),
+            "goals_per_episode": mean("goals_reached"), "feet_only_share": mean("feet_only_share"),
+            "first_arrival_s_mean": float(np.mean(arrivals)) if arrivals else None,
+            "speed_to_first_goal": float(np.mean(speeds)) if speeds else None}
+
+
+def write_json(path: Path, policy: OnnxPolicy, env: NativeEnv, episodes: list[dict]) -> None:
+    """Per-episode results and their summary, written atomically."""
+    rows = [{k: v for k, v in e.items() if k != "trajectory"} for e in episodes]
+    doc = {"policy": str(policy.path), "task": env.config.task, "engine": "mujoco (native C)",
+           "model": env.config.model_path, "model_matches_training": model_matches(policy, env),
+           "summary": summarize(episodes), "episodes": rows}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(doc, indent=1))
+    tmp.replace(path)
+
+
+def inference_rates(policy: OnnxPolicy, obs: np.ndarray, calls: int = 2000, repeats: int = 5) -> list[float]:
+    """Policy calls per second, one observation per call as a controller makes them, per repeat."""
+    import time
+
+    policy(obs)  # warm-up
+    rates = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        for _ in range(calls):
+            policy(obs)
+        rates.append(calls / (time.perf_counter() - start))
+    return rates
+
+
+# Viewer keys (GLFW key codes): move the goal in the world's x/y plane, or draw a new one.
+GOAL_KEYS = {73: (0.25, 0.0), 75: (-0.25, 0.0), 74: (0.0, 0.25), 76: (0.0, -0.25)}  # I, K, J, L; m
+NEW_GOAL_KEY = 78  # N
+RESET_KEY = 82  # R
+
+
+def view(policy: OnnxPolicy, env: NativeEnv, seed: int = 0) -> None:
+    """Run the policy in MuJoCo's interactive viewer, in real time, until the window closes.
+
+    The goal is the `goal` mocap body: double-click it and Ctrl+right-drag to move it, or use
+    I/J/K/L (+x, +y, -x, -y by 0.25 m), N (a new goal from the task) and R (a new episode)."""
+    import time
+
+    import mujoco.viewer
+
+    pending = []
+    with mujoco.viewer.launch_passive(env.mj_model, env.data, key_callback=pending.append) as viewer:
+        with viewer.lock():  # follow the torso from behind and above
+            viewer.cam.type = mujoco.mjtCamera.mjCAMERA_TRACKING
+            viewer.cam.trackbodyid = env.robot.torso
+            viewer.cam.distance, viewer.cam.elevation, viewer.cam.azimuth = 2.0, -30.0, 135.0
+        obs, episode = env.reset(seed=seed), 0
+        while viewer.is_running():
+            tick = time.perf_counter()
+            with viewer.lock():
+                for key in pending:
+                    if key in GOAL_KEYS:
+                        env.set_goal(env.goal + np.array(GOAL_KEYS[key]))
+                    elif key == NEW_GOAL_KEY:
+                        env.set_goal(env.new_goal())
+                    elif key == RESET_KEY:
+                        episode += 1
+                        obs = env.reset(seed=seed + episode)
+                pending.clear()
+                obs, _, terminated, truncated, _ = env.step(policy(obs))
+                if terminated or truncated:
+                    episode += 1
+                    obs = env.reset(seed=seed + episode)
+            viewer.sync()
+            time.sleep(max(0.0, env.dt - (time.perf_counter() - tick)))

@@ -1,0 +1,136 @@
+"""Off-screen MP4 video of a recorded trajectory (MuJoCo C and NumPy; no JAX).
+
+eval.py renders its MJX rollouts with it, play.py its native-MuJoCo episodes: frames are
+rendered from stored joint positions, so any engine's trajectory can be drawn.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from hexa_mjx.robot import constants as robot
+
+GL_PACKAGES = "libegl1 libegl-mesa0 libosmesa6"  # Debian/Ubuntu
+VIDEO_FPS = 30  # frames per second of videos (real time: every ctrl_hz / 30th control step)
+
+
+def render_video(env, qpos_frames: np.ndarray, path: Path, goals: np.ndarray, waypoints=(), width=640,
+                 height=480, fps: float = VIDEO_FPS, shadows: bool = False) -> int:
+    """Render qpos frames (T, nq, one per control step) from the tracking camera into a real-time
+    MP4 of about `fps` frames per second, with the goal marker at each frame's goal (T, 2) and the
+    waypoint path (start -> waypoints) drawn. Returns the number of frames written.
+
+    Shadows and the skybox are off unless `shadows`: with software OpenGL (no GPU) they cost 5x
+    the frame rate (docs/RESULTS.md, "Evaluation time")."""
+    import imageio.v2 as imageio
+    import mujoco
+
+    model = env.mj_model
+    data = mujoco.MjData(model)
+    mocap = model.body_mocapid[model.body(robot.GOAL_BODY).id]
+    if not os.environ.get("MUJOCO_GL"):
+        raise RuntimeError(f"no off-screen OpenGL found (neither EGL nor OSMesa): install it with "
+                           f"`apt-get install {GL_PACKAGES}`, or pass --no-video")
+    try:
+        renderer = mujoco.Renderer(model, height=height, width=width)
+    except Exception as e:
+        backend = os.environ.get("MUJOCO_GL", "none")
+        raise RuntimeError(
+            f"off-screen OpenGL ({backend}) is not usable: {e}. Install it with "
+            f"`apt-get install {GL_PACKAGES}` (or try MUJOCO_GL=osmesa), "
+            "or pass --no-video") from e
+    corners = np.vstack([qpos_frames[0, :2], np.asarray(waypoints, float).reshape(-1, 2) + env.qpos0[:2]])
+    stride = max(int(round(1 / (env.dt * fps))), 1)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.stem + ".tmp" + path.suffix)
+    written = 0
+    # The encoder is an ffmpeg subprocess. JAX warns on any fork in a threaded process; subprocess's
+    # fork is followed at once by exec in C, which is safe, so that warning is noise here.
+    warnings.filterwarnings("ignore", message=r"os\.fork\(\) was called", category=RuntimeWarning)
+    with imageio.get_writer(tmp, fps=1 / (env.dt * stride), codec="libx264", quality=7,
+                            macro_block_size=16) as writer:
+        for qpos, goal in zip(qpos_frames[::stride], goals[::stride]):
+            data.qpos[:] = qpos
+            data.mocap_pos[mocap, :2] = goal
+            mujoco.mj_forward(model, data)
+            renderer.update_scene(data, camera=robot.TRACKING_CAMERA)
+            renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = shadows
+            renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = shadows
+            if waypoints:
+                draw_path(renderer.scene, corners)
+            writer.append_data(renderer.render())
+            written += 1
+    renderer.close()
+    tmp.replace(path)
+    return written
+
+
+def draw_path(scene, corners: np.ndarray, width=0.01, height=0.003) -> None:
+    """Add the polyline through `corners` (x, y on the floor, m) to a MuJoCo scene as thin capsules."""
+    import mujoco
+
+    for a, b in zip(corners[:-1], corners[1:]):
+        if scene.ngeom >= scene.maxgeom:
+            return
+        geom = scene.geoms[scene.ngeom]
+        mujoco.mjv_initGeom(geom, mujoco.mjtGeom.mjGEOM_CAPSULE, np.zeros(3), np.zeros(3), np.eye(3).ravel(),
+                            np.array([0.9, 0.5, 0.1, 1.0], np.float32))
+        mujoco.mjv_connector(geom, mujoco.mjtGeom.mjGEOM_CAPSULE, width, np.array([*a, height]),
+                             np.array([*b, height]))
+        scene.ngeom += 1
+
+
+def render_rates(model, qpos, frames: int = 60, repeats: int = 3, width: int = 640, height: int = 480) -> dict:
+    """Frames per second rendering `qpos` from the tracking camera, shadows and skybox off and on
+    (median of `repeats`), with the OpenGL backend MUJOCO_GL names."""
+    import statistics
+    import time
+
+    import mujoco
+
+    data = mujoco.MjData(model)
+    data.qpos[:] = qpos
+    mujoco.mj_forward(model, data)
+    renderer = mujoco.Renderer(model, height=height, width=width)
+    rates = {}
+    for shadows in (False, True):
+        runs = []
+        for _ in range(repeats):
+            start = time.perf_counter()
+            for _ in range(frames):
+                renderer.update_scene(data, camera=robot.TRACKING_CAMERA)
+                renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = shadows
+                renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = shadows
+                renderer.render()
+            runs.append(frames / (time.perf_counter() - start))
+        rates["shadows" if shadows else "plain"] = statistics.median(runs)
+    renderer.close()
+    return rates
+
+
+def main(argv=None) -> None:
+    """`python -m hexa_mjx.evaluation.video --benchmark`: the renderer's frame rate on this machine."""
+    import argparse
+
+    from hexa_mjx.mdp.config import EnvConfig
+    from hexa_mjx.robot.model import RobotModel
+
+    parser = argparse.ArgumentParser(prog="python -m hexa_mjx.evaluation.video", description=main.__doc__)
+    parser.add_argument("--benchmark", action="store_true", help="time off-screen rendering")
+    parser.add_argument("--frames", type=int, default=60)
+    args = parser.parse_args(argv)
+    if not args.benchmark:
+        parser.error("nothing to do: pass --benchmark")
+    rm = RobotModel(EnvConfig())
+    rates = render_rates(rm.mj_model, rm.qpos0, args.frames)
+    print(f"MUJOCO_GL={os.environ.get('MUJOCO_GL', '')}: 640x480 frames/s, median of 3 runs of {args.frames}: "
+          f"{rates['plain']:.1f} without shadows and skybox (eval.py's default), {rates['shadows']:.1f} with them "
+          f"({rates['plain'] / rates['shadows']:.1f}x)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,158 @@
+"""One episode's logic for both engines: what happens around the physics on every control step.
+
+`Episode` holds a task, its settings and the robot; the MJX environment and the native-MuJoCo
+environment (`hexa_mjx.engines`) each own one and supply only their physics step, their contact
+arrays and their random draws. The episode's bookkeeping is a dict of arrays (`info`), the same in
+both engines: steps taken, success so far, goals completed, the curriculum level, the failed legs,
+each foot's air time and running stance, and the action latency.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from hexa_mjx.mdp import curriculum, events, rewards
+from hexa_mjx.mdp.config import EnvConfig, check_config
+from hexa_mjx.robot.kinematics import fell as flipped, namespace
+from hexa_mjx.robot.model import RobotModel, servo_power
+from hexa_mjx.tasks import reward_variants, task_class
+
+
+@dataclasses.dataclass(frozen=True)
+class Contacts:
+    """Robot-floor contact arrays of either engine: the geom pair and distance of each contact slot,
+    and the foot spheres' centres (feet, 3), m."""
+
+    geom1: object
+    geom2: object
+    dist: object
+    foot_pos: object
+
+
+def make_episode(config: EnvConfig, observe_as: str = "") -> "Episode":
+    """The episode of `config`'s task, its settings checked, its robot built; `observe_as` names
+    another task whose observation the policy sees (the report's policy on navigation goals)."""
+    task_cls = task_class(config.task)
+    config = dataclasses.replace(config, reward=config.reward or next(iter(task_cls.rewards)))
+    check_config(config)
+    task_cls.check(config)
+    if config.reward not in reward_variants():
+        raise ValueError(f"unknown reward {config.reward!r}; the {task_cls.name} task's are {list(task_cls.rewards)}")
+    if config.reward not in task_cls.rewards:
+        raise ValueError(f"reward {config.reward!r} is not one of the {task_cls.name} task's: {list(task_cls.rewards)}")
+    scales = rewards.make_scales(task_cls.rewards[config.reward], config.ablate, config.reward_scales,
+                                 extra_terms=task_cls.terms)
+    robot = RobotModel(config)
+    task = task_cls(config, robot)
+    observer = task_class(observe_as)(config, robot) if observe_as and observe_as != task.name else task
+    dt = robot.n_substeps * float(robot.mj_model.opt.timestep)
+    return Episode(task, observer, scales, dt, robot.n_substeps)
+
+
+class Episode:
+    """The task-independent episode around a `task` (hexa_mjx.tasks): start, events, reward, ending."""
+
+    def __init__(self, task, observer, scales: dict, dt: float, n_substeps: int):
+        self.task, self.observer, self.scales = task, observer, scales
+        self.config, self.robot = task.config, task.robot
+        self.dt, self.n_substeps = dt, n_substeps
+        self.active = [name for name, scale in scales.items() if scale != 0.0]
+        self.push_every = events.push_steps(self.config.push_interval, dt)
+        self.noise_scale = self.config.obs_noise * observer.noise_scale()
+
+    # -- starting an episode --------------------------------------------------
+
+    def start_qpos(self, qpos0, draws, key, level=0, spawn=None):
+        """An episode's start pose: the settled pose with the start noise, on a terrain at the
+        curriculum `level`'s column (`spawn`: the terrain's square centres)."""
+        cfg = self.config
+        qpos = events.start_qpos(qpos0, cfg.start_joint_noise, self.task.start_yaw_range, self.robot.joint_lo,
+                                 self.robot.joint_hi, draws, key)
+        if spawn is not None and cfg.curriculum_levels:
+            qpos = qpos.at[:2].add(events.level_spawn(level, spawn, draws, draws.fold_in(key, 6)))
+        return qpos
+
+    def start_info(self, draws, key) -> dict:
+        """The bookkeeping of a new episode."""
+        xp, legs = draws.xp, len(self.robot.legs)
+        return {"t": xp.zeros((), xp.int32), "success": xp.zeros(()), "goals": xp.zeros((), xp.int32),
+                "level": xp.zeros((), xp.int32),  # the curriculum's level, kept across episodes
+                "failed_legs": events.draw_failure(self.config, legs, draws, draws.fold_in(key, 3)),
+                "air_time": xp.zeros(legs),  # s since each foot last touched the floor
+                "stance_avg": xp.ones(legs),  # running share of time on the floor (all down)
+                "latency": events.draw_latency(self.config.action_latency, draws, draws.fold_in(key, 4))}
+
+    # -- one control step -----------------------------------------------------
+
+    def observe(self, qpos, qvel, ctrl, goal, heading, draws, key):
+        """The policy's observation, with the configured noise."""
+        obs = self.observer.observe(qpos, qvel, ctrl, goal, heading)
+        return events.noisy(obs, self.noise_scale, draws, key) if self.config.obs_noise else obs
+
+    def failed_servos(self, info):
+        """Whether each actuator's leg has failed this episode."""
+        return info["failed_legs"][self.robot.actuator_leg] > 0
+
+    def delay(self, info):
+        """Physics steps of each control step for which the previous command still holds."""
+        return namespace(info["latency"]).round(info["latency"] * self.n_substeps)
+
+    def servo_ctrl(self, step, delay, target, previous, qpos, failed):
+        """The servo targets at physics step `step` (latency, then failed servos)."""
+        return events.servo_ctrl(step, delay, target, previous, qpos[self.robot.actuator_qpos], failed,
+                                 self.config, self.robot.hold_ctrl)
+
+    def transition(self, info, prev_qpos, qpos, qvel, goal, heading, contacts: Contacts, actuator_force, finite,
+                   draws, key):
+        """Everything after the physics of one control step: termination, reward terms, goals and
+        bookkeeping. Returns (info, unscaled reward terms, figures, next goal); `figures` hold the
+        step's distance, success so far, goals, whether it fell, ended, reached or completed a goal."""
+        xp, cfg = namespace(qpos), self.config
+        fell = flipped(qpos[3:7])
+        done = fell | ~finite
+        # Every term sees the goal of this step; a goal reached now is replaced only afterwards, so
+        # the step that draws a new goal pays no spurious approach reward or penalty.
+        dist = xp.linalg.norm(goal - qpos[:2])
+        reached = self.task.reached(dist, qpos, heading)
+        completed = self.task.goal_completed(reached, info["goals"])
+        stance = self.robot.foot_stance(contacts.geom1, contacts.geom2, contacts.dist)
+        air_time = xp.where(stance, 0.0, info["air_time"] + self.dt)
+        stance_avg = rewards.running_stance(info["stance_avg"], stance, self.dt)
+        bad, non_foot = self.robot.contact_counts(contacts.geom1, contacts.geom2, contacts.dist, contacts.foot_pos,
+                                                  cfg.lift_clearance)
+        power = servo_power(actuator_force, qvel, self.robot.actuator_dof)
+        terms = rewards.terms([name for name in self.active if name in rewards.TERMS], cfg, prev_qpos, qpos, qvel,
+                              goal, bad, non_foot, done, completed, power, ground=self.robot.ground(qpos[:2]),
+                              air_time=air_time, working=1.0 - info["failed_legs"], stance_avg=stance_avg)
+        terms.update(self.task.reward_terms(self.active, prev_qpos, qpos, qvel, goal, heading))
+        terms = {name: terms[name] for name in self.active}  # the scales' order: the reward sums in it
+
+        t = info["t"] + 1
+        over = done | (t >= cfg.episode_length)
+        goals = info["goals"] + completed
+        level = info["level"]
+        if cfg.curriculum_levels:
+            level = curriculum.next_level(level, cfg.curriculum_levels, completed, over, done | (goals == 0))
+        next_goal = xp.where(completed, self.task.next_goal(qpos, goal, goals, draws, key, level), goal)
+        success = xp.maximum(info["success"], reached.astype(xp.float32))
+        info = {**info, "t": t, "success": success, "goals": goals, "level": level, "air_time": air_time,
+                "stance_avg": stance_avg}
+        figures = {"distance": dist, "success": success, "goals": goals, "fell": fell, "done": done, "over": over,
+                   "reached": reached, "completed": completed, "non_foot": non_foot}
+        return info, terms, figures, next_goal
+
+    def scaled(self, terms: dict) -> dict:
+        """Each term times its scale."""
+        return {name: self.scales[name] * value for name, value in terms.items()}
+
+    def restart_info(self, info, over, draws, key, rate=None, p=None) -> dict:
+        """`info` for the step after: a new episode's where `over` (brax's auto-reset keeps `info`,
+        so the next episode's leg failure and latency are drawn here), the curriculum level kept."""
+        xp = draws.xp
+        failed = events.draw_failure(self.config, len(self.robot.legs), draws, draws.fold_in(key, 3), rate, p)
+        latency = events.draw_latency(self.config.action_latency, draws, draws.fold_in(key, 4))
+        return {**info, "t": xp.where(over, 0, info["t"]), "success": xp.where(over, 0.0, info["success"]),
+                "goals": xp.where(over, 0, info["goals"]),
+                "failed_legs": xp.where(over, failed, info["failed_legs"]),
+                "air_time": xp.where(over, 0.0, info["air_time"]), "stance_avg": xp.where(over, 1.0, info["stance_avg"]),
+                "latency": xp.where(over, latency, info["latency"])}

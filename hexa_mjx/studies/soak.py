@@ -1,0 +1,240 @@
+"""Soak: hostile actions for millions of env steps, and a training run killed again and again.
+
+    python -m hexa_mjx.studies.soak [--env_steps 10000000] [--kills 20] [--out runs/soak] [--seed 0]
+
+Not a unit test: about an hour on a 2-core CPU (runs/soak took 27 min for the actions, 33 for the
+kills). Two parts, each skippable:
+
+1. **Actions** (`--env_steps`): batched environments (training's wrappers, randomized physics,
+   pushes) stepped with actions that are per step and environment, uniform in [-1, 1], huge
+   (x1e6), all NaN, all +-inf, or a per-joint mix of those. Counts non-finite observations and
+   rewards (the target is none), and the episodes that ended on a non-finite physics state.
+2. **Kills** (`--kills`): a small training run (`--train_args`, by default the fast preset for
+   1.97M steps) first runs uninterrupted; then the same run is started in another folder, killed
+   with SIGKILL after a random delay and resumed, until `--kills` kills have landed, then resumed
+   to the end. Each delay is uniform between 0 and the uninterrupted run's time to its second
+   checkpoint (plus imports), so a kill lands anywhere: importing, compiling, training,
+   evaluating, writing a checkpoint. Checks: every evaluation row exactly once and one per
+   checkpoint, every checkpoint readable, no `tmp-*` left, Adam's step count at every checkpoint
+   equal to the updates trained up to it; reports the final parameters' and evaluation's
+   difference from the uninterrupted run (the resume gap, docs/RESULTS.md "Reliability").
+
+Writes `<out>/soak.json` (a skipped part keeps its earlier figures); prints a summary. A finished
+run directory is reused.
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import json
+import random
+import shlex
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[2]
+# 30 intervals of 4 updates of 16,384 steps: brax rounds each interval up to whole updates, so a
+# budget on this grid keeps every resumed run's evaluations on the uninterrupted run's steps.
+DEFAULT_TRAIN = "--preset fast --num_timesteps 1966080 --num_evals 31 --start_joint_noise 0.1"
+IMPORT_S = 10.0  # train.py's start before its run clock: imports, model compile
+
+
+def hostile_actions(key, num_envs: int, action_size: int):
+    """Actions per environment: uniform in [-1, 1] (40%), x1e6 (15%), NaN (15%), +-inf (15%), or a
+    per-joint mix of all four (15%)."""
+    import jax
+    import jax.numpy as jp
+
+    k_mode, k_u, k_sign, k_mix = jax.random.split(key, 4)
+    u = jax.random.uniform(k_u, (num_envs, action_size), minval=-1, maxval=1)
+    sign = jp.where(jax.random.bernoulli(k_sign, 0.5, u.shape), 1.0, -1.0)
+    kinds = jp.stack([u, u * 1e6, jp.full_like(u, jp.nan), sign * jp.inf])  # (4, envs, joints)
+    mode = jax.random.choice(k_mode, 5, (num_envs, 1), p=jp.array([0.4, 0.15, 0.15, 0.15, 0.15]))
+    per_joint = jax.random.randint(k_mix, u.shape, 0, 4)
+    pick = jp.where(mode == 4, per_joint, mode)
+    return jp.take_along_axis(kinds, pick[None], axis=0)[0]
+
+
+def soak_actions(env_steps: int, num_envs: int, seed: int, chunk: int = 100) -> dict:
+    """Step `num_envs` randomized, pushed environments with hostile actions for `env_steps` env steps."""
+    import jax
+    import jax.numpy as jp
+
+    from hexa_mjx.training import config
+    from hexa_mjx.mdp import randomization
+    from hexa_mjx.engines import wrappers
+
+    cfg = config.TrainConfig(randomize=True, push_speed=0.5, start_joint_noise=0.1)
+    env = config.make_env_for(cfg)
+    keys = jax.random.split(jax.random.PRNGKey(seed), num_envs)
+    models = functools.partial(randomization.randomization_fn(env), rng=jax.random.split(keys[0], num_envs))
+    batched = wrappers.wrap_for_training(env, episode_length=cfg.episode_length, randomization_fn=models)
+
+    def run(state, key):
+        def body(carry, _):
+            state, key, bad_obs, bad_reward, nonfinite_ends, ends = carry
+            key, k = jax.random.split(key)
+            state = batched.step(state, hostile_actions(k, num_envs, env.action_size))
+            bad_obs += (~jp.isfinite(state.obs).all(axis=-1)).sum()
+            bad_reward += (~jp.isfinite(state.reward)).sum()
+            nonfinite_ends += (state.metrics["nonfinite"] > 0).sum()
+            ends += (state.done > 0).sum()
+            return (state, key, bad_obs, bad_reward, nonfinite_ends, ends), None
+
+        zero = jp.zeros((), jp.int32)
+        carry, _ = jax.lax.scan(body, (state, key, zero, zero, zero, zero), None, length=chunk)
+        return carry[0], carry[1], jp.stack(carry[2:])
+
+    run = jax.jit(run)
+    state = jax.jit(batched.reset)(keys)
+    key = jax.random.PRNGKey(seed + 1)
+    totals, steps, t0, shown = np.zeros(4, np.int64), 0, time.time(), 0.0
+    while steps < env_steps:
+        state, key, counts = run(state, key)
+        totals += np.asarray(counts)
+        steps += chunk * num_envs
+        if time.time() - shown > 15:
+            shown = time.time()
+            print(f"  actions: {steps:,}/{env_steps:,} env steps, {steps / (shown - t0):,.0f}/s; non-finite "
+                  f"observations {totals[0]}, rewards {totals[1]}", flush=True)
+    return {"env_steps": steps, "num_envs": num_envs, "nonfinite_observations": int(totals[0]),
+            "nonfinite_rewards": int(totals[1]), "episodes_ended_nonfinite": int(totals[2]),
+            "episodes_ended": int(totals[3]), "seconds": round(time.time() - t0, 1)}
+
+
+def train_command(args: list[str], run_dir: Path, resume: bool) -> list[str]:
+    return [sys.executable, str(ROOT / "train.py"), *args, "--run_dir", str(run_dir), *(["--resume"] * resume)]
+
+
+def rows(run_dir: Path) -> list[dict]:
+    return [json.loads(line) for line in (run_dir / "metrics.jsonl").read_text().splitlines()]
+
+
+def finished(run_dir: Path, args: list[str]) -> bool:
+    from hexa_mjx.training import checkpoints, config
+
+    if not (run_dir / "config.json").is_file():
+        return False
+    found = checkpoints.list_checkpoints(run_dir)
+    return bool(found) and found[-1][0] >= config.parse_args(args).num_timesteps
+
+
+def soak_kills(kills: int, train_args: list[str], out: Path, seed: int) -> dict:
+    """The uninterrupted run, then the same run killed `kills` times and resumed; see the module doc."""
+    import jax
+
+    from hexa_mjx.training import checkpoints, config, optimizer_state, loop as training
+
+    whole, killed = out / "uninterrupted", out / "killed"
+    if not finished(whole, train_args):
+        t0 = time.time()
+        subprocess.run(train_command(train_args, whole, resume=(whole / "config.json").is_file()), check=True)
+        (out / "uninterrupted_s.txt").write_text(f"{time.time() - t0:.1f}\n")
+    reference = rows(whole)
+    # Kills land between the start and about the second checkpoint (IMPORT_S covers the imports
+    # before the run's clock starts), so a resumed run usually gets somewhat further each time.
+    longest = IMPORT_S + reference[2]["walltime_s"]
+
+    rng = random.Random(seed)
+    attempts, landed, t0 = [], 0, time.time()
+    while landed < kills and not finished(killed, train_args):
+        resume = (killed / "config.json").is_file()
+        proc = subprocess.Popen(train_command(train_args, killed, resume), stdout=subprocess.PIPE,
+                                stderr=subprocess.STDOUT, text=True)
+        delay = rng.uniform(0, longest)
+        try:
+            output = proc.communicate(timeout=delay)[0]
+        except subprocess.TimeoutExpired:
+            proc.send_signal(signal.SIGKILL)
+            output = proc.communicate()[0]
+        resumed = [line for line in output.splitlines() if line.startswith(("resuming", "removed", "warning"))]
+        attempts.append({"delay_s": round(delay, 1), "returncode": proc.returncode, "log": resumed})
+        landed += proc.returncode == -signal.SIGKILL
+        found = checkpoints.list_checkpoints(killed)
+        print(f"  attempt {len(attempts)}: {'killed' if proc.returncode == -signal.SIGKILL else 'finished'} after "
+              f"{delay:5.1f} s; latest checkpoint {found[-1][0] if found else 0:,}", flush=True)
+    subprocess.run(train_command(train_args, killed, resume=True), check=True, stdout=subprocess.DEVNULL)
+    killed_s = time.time() - t0
+
+    cfg = config.load_config(whole)
+    template = training.init_params(cfg, config.make_env_for(cfg))
+    adam_template = optimizer_state.adam_template(template)
+    unreadable, adam_counts_continue = [], True
+    per_update = cfg.update_epochs * cfg.num_minibatches  # Adam steps per PPO update
+    saved = checkpoints.list_checkpoints(killed)
+    for step, path in saved:
+        try:
+            checkpoints.load_checkpoint(path, template)
+            adam = checkpoints.load_optimizer(path, adam_template)
+            # A fresh Adam at any resume would count fewer steps than the updates trained so far.
+            adam_counts_continue &= int(adam[0].count) == step // cfg.steps_per_update * per_update
+        except RuntimeError as e:
+            unreadable.append(str(e))
+    finals = [checkpoints.list_checkpoints(whole)[-1][1], saved[-1][1]]
+    (_, a), (_, b) = (checkpoints.load_checkpoint(p, template) for p in finals)
+    adam_a, adam_b = (checkpoints.load_optimizer(p, adam_template) for p in finals)
+    flat = lambda params: np.concatenate([np.ravel(x) for x in jax.tree.leaves(params[1])])  # noqa: E731
+    killed_rows = rows(killed)
+    steps_whole, steps_killed = [r["step"] for r in reference], [r["step"] for r in killed_rows]
+    last_a, last_b = reference[-1], killed_rows[-1]
+    return {
+        "train_args": train_args, "kills_delivered": landed,
+        "attempts": attempts, "kill_delay_max_s": round(longest, 1),
+        # Each evaluation once, one per checkpoint (and step 0), on the uninterrupted run's steps.
+        "rows_each_once": len(set(steps_killed)) == len(steps_killed) and set(steps_killed) == {0, *(s for s, _ in saved)},
+        "same_steps_as_uninterrupted": steps_killed == steps_whole, "rows": len(steps_killed),
+        "adam_counts_continue": adam_counts_continue,
+        "checkpoints": len(saved), "unreadable_checkpoints": unreadable,
+        "tmp_left": len(list((killed / "checkpoints").glob("tmp-*"))),
+        "adam_count": [int(adam_a[0].count), int(adam_b[0].count)],
+        "policy_param_relative_difference": float(np.linalg.norm(flat(a) - flat(b)) / np.linalg.norm(flat(a))),
+        "final_evaluation": {key: [last_a.get(key), last_b.get(key)] for key in
+                             ("step", "success_rate", "final_distance", "episode_return", "fall_rate")},
+        "killed_run_total_s": round(killed_s, 1),
+    }
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--env_steps", type=int, default=10_000_000, help="hostile-action env steps (0 skips)")
+    parser.add_argument("--num_envs", type=int, default=256, help="environments stepped together")
+    parser.add_argument("--kills", type=int, default=20, help="SIGKILLs of the training run (0 skips)")
+    parser.add_argument("--train_args", default=DEFAULT_TRAIN, help="train.py flags of the killed run")
+    parser.add_argument("--out", type=Path, default=Path("runs/soak"), help="folder for the runs and soak.json")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the actions and of the kill delays")
+    args = parser.parse_args(argv)
+    if args.env_steps < 0 or args.kills < 0 or args.num_envs < 1:
+        parser.error("--env_steps and --kills must be >= 0 and --num_envs >= 1")
+    train_args = shlex.split(args.train_args)
+    if args.kills:
+        from hexa_mjx.training import config
+
+        try:
+            config.parse_args([*train_args, "--run_dir", str(args.out / "killed")])
+        except (config.ConfigError, SystemExit) as e:
+            parser.error(f"--train_args: {e}")
+        if any(a in train_args for a in ("--run_dir", "--resume")):
+            parser.error("--train_args: leave out --run_dir and --resume (the soak sets them)")
+    args.out.mkdir(parents=True, exist_ok=True)
+    path = args.out / "soak.json"
+    report = json.loads(path.read_text()) if path.is_file() else {}
+    if args.env_steps:
+        print(f"actions: {args.env_steps:,} env steps on {args.num_envs} environments", flush=True)
+        report["actions"] = soak_actions(args.env_steps, args.num_envs, args.seed)
+        print(json.dumps(report["actions"]), flush=True)
+    if args.kills:
+        print(f"kills: {args.kills} SIGKILLs of train.py {args.train_args}", flush=True)
+        report["kills"] = soak_kills(args.kills, train_args, args.out, args.seed)
+        print(json.dumps({k: v for k, v in report["kills"].items() if k != "attempts"}), flush=True)
+    path.write_text(json.dumps(report, indent=2))
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()

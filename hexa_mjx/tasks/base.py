@@ -1,0 +1,111 @@
+"""The task interface: everything that differs between tasks, engine-neutral.
+
+A task is one module in `hexa_mjx.tasks` with one `Task` subclass, listed in the registry
+(`hexa_mjx.tasks.TASKS`). Its methods take NumPy or JAX arrays and random `draws` from either
+engine, so the MJX environment, native MuJoCo, Gymnasium, play.py and export all run the same code.
+
+The goal is the model's `goal` mocap body: its (x, y) is where the task sends the robot, and its
+heading (yaw, rad) what a task may ask the torso to face. Both are part of the physics state.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hexa_mjx.mdp import observations
+from hexa_mjx.robot.kinematics import namespace
+
+
+class Task:
+    """A task's defaults: one goal that is never replaced, the configured start heading noise."""
+
+    name = ""  # the key in hexa_mjx.tasks.TASKS
+    gym_id = ""  # its Gymnasium id, "hexa_mjx/...-v0"
+    summary = ""  # one line for --help and the README's table
+    # Reward variants: name -> scales table of hexa_mjx.mdp.rewards terms (and the task's own
+    # `terms`); the first is the task's default.
+    rewards: dict[str, dict[str, float]] = {}
+    terms: dict = {}  # the task's own reward terms: name -> fn(prev_qpos, qpos, qvel, goal, heading)
+    gait_window = "to_goal"  # eval.py's gait analysis reads the walk to the first goal, or "alive" steps
+    uses_heading = False  # whether the goal marker's heading is part of the task
+    follows_waypoints = False  # whether EnvConfig.waypoints set its goals
+
+    def __init__(self, config, robot):
+        self.config, self.robot = config, robot
+
+    @classmethod
+    def check(cls, config) -> None:
+        """Raise ValueError for settings this task cannot run (before anything is built)."""
+        if config.curriculum_levels:
+            raise ValueError(f"curriculum_levels applies to the navigate task's random goals only; the {cls.name} "
+                             "task has none: leave it at 0")
+
+    # -- the episode ----------------------------------------------------------
+
+    @property
+    def start_yaw_range(self) -> float:
+        """The start heading is turned uniformly in +-this, rad."""
+        return self.config.start_yaw_noise
+
+    def first_goal(self, qpos, draws, key, level=0):
+        """The goal (x, y), m, of an episode starting at `qpos`, at the curriculum's `level`."""
+        raise NotImplementedError
+
+    def goal_heading(self, qpos, draws, key):
+        """The heading (rad) the goal marker asks for, for tasks with `uses_heading`."""
+        return None
+
+    def reached(self, dist, qpos, heading):
+        """Whether the torso is where the task asks (`dist`: m from the goal): within `success_radius`."""
+        return dist < self.config.success_radius
+
+    def goal_completed(self, reached, goals):
+        """Whether this step completes a goal, given that the torso is within the radius (`reached`)
+        and `goals` were completed earlier in the episode. Default: goals are never replaced."""
+        return namespace(reached).zeros((), bool)
+
+    def next_goal(self, qpos, goal, goals, draws, key, level=0):
+        """The goal that follows `goals` completed ones, from the state that completed the last."""
+        return goal
+
+    def reward_terms(self, names, prev_qpos, qpos, qvel, goal, heading) -> dict:
+        """Unscaled values of the task's own terms among `names`."""
+        return {name: self.terms[name](prev_qpos, qpos, qvel, goal, heading) for name in names if name in self.terms}
+
+    # -- what the policy sees -------------------------------------------------
+
+    def observe(self, qpos, qvel, ctrl, goal, heading):
+        """The policy's observation of a physics state."""
+        raise NotImplementedError
+
+    @classmethod
+    def layout(cls, joints: int) -> list[tuple[int, int, str, str]]:
+        """(start, end, what, units) of every slice of the observation, on a robot with `joints` joints."""
+        raise NotImplementedError
+
+    def noise_scale(self) -> np.ndarray:
+        """Per-value half-width of observation noise at obs_noise=1."""
+        return observations.noise_scale(self.layout(len(self.robot.ctrl_lo)))
+
+    def deployment_settings(self) -> dict:
+        """Settings the exported policy must run with that the config leaves implicit."""
+        return {}
+
+    # -- figures --------------------------------------------------------------
+
+    @classmethod
+    def progress_figure(cls, row: dict) -> str:
+        """The task's figure on the progress line, from an evaluation row."""
+        return f"goal bonus {row['goal_bonus']:7.1f}"
+
+    def evaluation(self, env, start_qpos, traj, alive, fell) -> tuple[dict, dict]:
+        """The task's own figures for eval.py: (summary entries, per-episode entries)."""
+        return {}, {}
+
+    def evaluation_settings(self) -> dict:
+        """The task's settings eval.py records with its figures."""
+        return {}
+
+    def plot(self, env, start_qpos, traj, out):
+        """A plot of the rollout for eval.py (a path), or None."""
+        return None

@@ -1,0 +1,37 @@
+"""Crash points for reliability tests: kill this process (SIGKILL, as `kill -9` would) at a chosen
+moment of a training run.
+
+    HEXA_MJX_KILL_AT=NAME[@N] python train.py ...
+
+kills the run the N-th time (default 1st) it reaches the point NAME:
+
+- `training-started`: after the step-0 evaluation, before the first checkpoint;
+- `row-written`: an evaluation's row written to metrics.jsonl, its checkpoint not yet saved;
+- `checkpoint-writing`: a checkpoint's files written into its temporary folder, not yet renamed;
+- `checkpoint-saved`: a checkpoint complete (`hexa_mjx.training.loop` writes the evaluation's row first).
+
+Unset (the normal case), `point` does nothing but compare a string.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+
+VARIABLE = "HEXA_MJX_KILL_AT"
+POINTS = ("training-started", "row-written", "checkpoint-writing", "checkpoint-saved")
+_reached: dict[str, int] = {}
+
+
+def point(name: str) -> None:
+    """Count one arrival at crash point `name`; SIGKILL this process if HEXA_MJX_KILL_AT names it."""
+    assert name in POINTS, name
+    wanted = os.environ.get(VARIABLE)
+    if not wanted:
+        return
+    target, _, nth = wanted.partition("@")
+    if target != name:
+        return
+    _reached[name] = _reached.get(name, 0) + 1
+    if _reached[name] == int(nth or 1):
+        os.kill(os.getpid(), signal.SIGKILL)

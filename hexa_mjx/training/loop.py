@@ -1,0 +1,230 @@
+"""Brax PPO over the hexapod environment: networks, policy loading, and the training run.
+
+`train.py` is the command-line face of `train(config)`. A run directory holds `config.json`,
+`metrics.jsonl` (one row per evaluation), TensorBoard events in `tb/` and `checkpoints/<step>/`;
+see `hexa_mjx.training.config`, `hexa_mjx.training.checkpoints` and `hexa_mjx.training.progress`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import json
+import math
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jp
+from flax import linen
+
+from hexa_mjx.training import distributed, crash_points as faults, ppo
+from hexa_mjx.mdp import randomization
+from hexa_mjx.training.checkpoints import (checkpoint_dir, list_checkpoints, load_checkpoint, load_latest, remove_temporaries,
+                                  save_checkpoint)
+from hexa_mjx.training.config import TrainConfig, init_checkpoint, make_env_for, validate
+from hexa_mjx.mdp.curriculum import level_summary
+from hexa_mjx.mdp.failure_schedule import schedule_summary
+from hexa_mjx.training.jax_setup import devices_for, prepare_jax
+from hexa_mjx.training.optimizer_state import adam_template
+from hexa_mjx.training.progress import Logger, keep_rows_up_to
+from hexa_mjx.evaluation.run_evaluator import RunEvaluator
+from hexa_mjx.engines.wrappers import mean_last_return
+
+
+def network_factory(cfg: TrainConfig):
+    """brax's PPO network factory with the config's layer sizes and tanh activations."""
+    from brax.training.agents.ppo import networks as ppo_networks
+
+    # CleanRL's actor: state-independent log std (starting at std 1 by default), a small output layer for the mean.
+    return functools.partial(ppo_networks.make_ppo_networks, policy_hidden_layer_sizes=tuple(cfg.hidden),
+                             value_hidden_layer_sizes=tuple(cfg.hidden), activation=linen.tanh,
+                             distribution_type=cfg.policy_dist, noise_std_type="log", init_noise_std=cfg.init_noise_std,
+                             mean_kernel_init_fn=jax.nn.initializers.variance_scaling,
+                             mean_kernel_init_kwargs={"scale": cfg.mean_init_scale ** 2, "mode": "fan_in",
+                                                      "distribution": "uniform"})
+
+
+def make_networks(cfg: TrainConfig, env):
+    """Networks as PPO trained them: observations normalized by the saved running statistics."""
+    from brax.training.acme import running_statistics
+
+    return network_factory(cfg)(env.observation_size, env.action_size,
+                                preprocess_observations_fn=running_statistics.normalize)
+
+
+def init_params(cfg: TrainConfig, env):
+    """Fresh (normalizer, policy, value) params: the structure checkpoints restore into."""
+    from brax.training.acme import running_statistics, specs
+
+    nets = make_networks(cfg, env)
+    key_policy, key_value = jax.random.split(jax.random.PRNGKey(cfg.seed))
+    normalizer = running_statistics.init_state(specs.Array((env.observation_size,), jp.dtype("float32")))
+    return normalizer, nets.policy_network.init(key_policy), nets.value_network.init(key_value)
+
+
+def make_inference(cfg: TrainConfig, env, params, deterministic=True):
+    """A policy function obs -> action from saved params."""
+    from brax.training.agents.ppo import networks as ppo_networks
+
+    make_policy = ppo_networks.make_inference_fn(make_networks(cfg, env))
+    policy = make_policy(params, deterministic=deterministic)
+    return lambda obs, key: policy(obs, key)[0]
+
+
+def ppo_settings(cfg: TrainConfig) -> dict:
+    """The algorithm and rollout shape of `cfg` as keyword arguments of `hexa_mjx.training.ppo.train` (and of
+    brax's `ppo.train`, which takes the same)."""
+    return dict(num_envs=cfg.num_envs, episode_length=cfg.episode_length, learning_rate=cfg.lr,
+                entropy_cost=cfg.ent_coef, discounting=cfg.discount, unroll_length=cfg.unroll_length,
+                batch_size=cfg.batch_size, num_minibatches=cfg.num_minibatches,
+                num_updates_per_batch=cfg.update_epochs, normalize_observations=True,
+                reward_scaling=cfg.reward_scaling, clipping_epsilon=cfg.clip, gae_lambda=cfg.gae_lambda,
+                max_grad_norm=cfg.max_grad_norm, vf_loss_coefficient=cfg.vf_coef,
+                network_factory=network_factory(cfg))
+
+
+def evals_for(cfg: TrainConfig, remaining: int) -> int:
+    """brax's num_evals for `remaining` of the run's steps, at least as dense as the run's own
+    spacing: a resumed run must not crowd all of its evaluations into the steps it has left (brax
+    counts the evaluation before training as one of them)."""
+    return 1 + max(1, math.ceil((cfg.num_evals - 1) * remaining / cfg.num_timesteps))
+
+
+def wrap_env_fn(env, randomized: bool = False, track_returns: bool = False, failure_schedule: dict | None = None):
+    """brax's training wrappers, or ours that redraw the start state (and first goal) every episode,
+    give each environment its own randomized model, keep each environment's latest return for the
+    progress line (`track_returns`), and schedule leg failures (`failure_schedule`,
+    hexa_mjx.mdp.failure_schedule)."""
+    from hexa_mjx.engines import wrappers
+
+    fresh_starts = env.fresh_starts or randomized
+    if not track_returns and failure_schedule is None:
+        return wrappers.wrap_for_training if fresh_starts else None
+    return functools.partial(wrappers.wrap_for_training, track_returns=track_returns, fresh_starts=fresh_starts,
+                             failure_schedule=failure_schedule)
+
+
+def failure_schedule_for(cfg: TrainConfig, start_step: int) -> dict | None:
+    """`LegFailureSchedule`'s settings for a run (None without a schedule): `--leg_failure_after` in
+    control steps per environment, counted from `start_step` (a resumed run's checkpoint)."""
+    if not (cfg.leg_failure_after or cfg.leg_failure_adaptive):
+        return None
+    after = max(0, cfg.leg_failure_after - start_step)
+    return dict(start_after=-(-after // cfg.num_envs), adaptive=cfg.leg_failure_adaptive)
+
+
+def resume_point(cfg: TrainConfig, run_dir: Path, template, optimizer_template) -> tuple[int, object, object]:
+    """(step, params, Adam state) to continue from: (0, None, None) for a new run, or one with no
+    readable checkpoint; the Adam state is None for a checkpoint saved without it."""
+    if remove_temporaries(run_dir):
+        print(f"removed half-written checkpoint folders in {checkpoint_dir(run_dir)}")
+    if not cfg.resume:
+        return 0, None, None
+    if not list_checkpoints(run_dir):
+        print(f"{run_dir} has no complete checkpoint yet (it stopped before its first): starting again from step 0")
+        return 0, None, None
+    start_step, restore, optimizer = load_latest(run_dir, template, optimizer_template)
+    if restore is None:
+        print(f"{run_dir} has no readable checkpoint: starting again from step 0")
+        return 0, None, None
+    print(f"resuming {run_dir} from step {start_step:,}"
+          + ("" if optimizer is not None else " (its checkpoint has no optimizer state: Adam starts afresh)"))
+    return start_step, restore, optimizer
+
+
+def train(cfg: TrainConfig, on_eval=None) -> dict:
+    """Run (or resume) PPO for `cfg`; returns the last evaluation row. `on_eval(row)` is called with
+    each evaluation's metrics.jsonl row (a sweep reports them to its scheduler)."""
+    prepare_jax(cpu_devices=cfg.cpu_devices, compile_cache=cfg.compile_cache)
+    main = distributed.is_main()  # process 0 (or the only one) reads and writes the run directory
+    cfg = validate(cfg, writes=main)
+    run_dir = Path(cfg.run_dir)
+    # The curriculum shapes the training environment only: evaluations see the full task.
+    env = make_env_for(cfg, curriculum_levels=cfg.curriculum_levels)
+    eval_env = make_env_for(cfg) if cfg.curriculum_levels else env
+    template = init_params(cfg, env)
+    optimizer_template = adam_template(template)
+    start_step, restore, optimizer, logged = 0, None, None, set()
+    if main:
+        start_step, restore, optimizer = resume_point(cfg, run_dir, template, optimizer_template)
+        if restore is None and cfg.init_from:  # a fine-tuning run's own checkpoints come first on resume
+            source_step, restore = load_checkpoint(init_checkpoint(cfg), template)
+            print(f"starting from the params of {cfg.init_from} (its step {source_step:,}); Adam starts afresh")
+        # One row per evaluation: rows past the checkpoint go, and the checkpoint's own evaluation is
+        # logged again only if its row is missing (a run from before rows were written first).
+        logged = keep_rows_up_to(run_dir, start_step)
+        tmp = run_dir / "config.json.tmp"
+        tmp.write_text(json.dumps(dataclasses.asdict(cfg), indent=2))
+        tmp.replace(run_dir / "config.json")
+    start_step, restored, adam = (int(x) for x in distributed.share(
+        jp.array([start_step, restore is not None, optimizer is not None])))
+    if restored:
+        restore = distributed.share(restore if main else template)
+    if adam:
+        optimizer = distributed.share(optimizer if main else optimizer_template)
+    remaining = cfg.num_timesteps - start_step
+    if remaining <= 0:
+        print(f"{run_dir} already has {start_step:,} of {cfg.num_timesteps:,} steps; nothing to do")
+        return {}
+
+    logger = Logger(run_dir, cfg, start_step) if main else None
+    schedule = failure_schedule_for(cfg, start_step)
+
+    # A fresh run evaluates its untrained params if asked; a resumed one its checkpoint's only if
+    # that row is missing (a crash between the two, or a run from before rows were written first).
+    evaluate_start = start_step not in logged and (cfg.eval_at_start or start_step > 0)
+    randomization_fn = randomization.randomization_fn(env) if cfg.randomize else None
+    evaluator = RunEvaluator(eval_env, wrap_env_fn(env, cfg.randomize), randomization_fn, cfg.num_eval_envs,
+                             cfg.episode_length, seed=cfg.seed + start_step) if main else None
+
+    def on_interval(step, make_policy, params, adam, env_state):  # process 0: before training, after each interval
+        if step == 0 and not evaluate_start:
+            return
+        logger.evaluating()
+        metrics = evaluator(make_policy, params)
+        # Where the curriculum's environments are (levels restart at 0 on resume), and the failure schedule.
+        if cfg.curriculum_levels:
+            metrics.update(level_summary(env_state.info["level"], cfg.curriculum_levels))
+        if schedule:
+            metrics.update(schedule_summary(env_state.info))
+        logger(start_step + step, metrics)
+        if step == 0:
+            faults.point("training-started")
+        else:
+            # Row first, then checkpoint: a crash between them loses neither, because a resume drops
+            # the rows past its checkpoint and trains those steps again.
+            faults.point("row-written")
+            save_checkpoint(run_dir, start_step + step, params, adam if cfg.record_optimizer else None)
+        if on_eval:  # a sweep's scheduler may stop the run here: its checkpoint is saved
+            on_eval(logger.last)
+
+    def on_update(step, env_state):
+        logger.progress(start_step + step, lambda: mean_last_return(env_state))
+
+    t0 = time.time()
+    devices = devices_for(cfg)
+    processes = f" x {jax.process_count()} processes" if jax.process_count() > 1 else ""
+    print(f"training {cfg.task}: {cfg.reward} (ablate {cfg.ablate or 'none'}) seed {cfg.seed}: {remaining:,} steps on "
+          f"{cfg.num_envs} envs ({devices} {jax.default_backend()} device{'s' * (devices > 1)}{processes}), "
+          f"{cfg.steps_per_update:,} steps per update -> {run_dir}", flush=True)
+    if logger:
+        logger.compiling(evaluation_first=evaluate_start)
+    ppo.train(env, num_timesteps=remaining, num_evals=evals_for(cfg, remaining), seed=cfg.seed + start_step,
+              **ppo_settings(cfg), max_devices_per_host=devices,
+              # Returns are kept whether or not this process prints them: every process runs one program.
+              wrap_env_fn=wrap_env_fn(env, cfg.randomize, track_returns=True, failure_schedule=schedule),
+              randomization_fn=randomization_fn, restore_params=restore, restore_adam=optimizer,
+              anneal_lr=(start_step, cfg.num_timesteps) if cfg.anneal_lr else None,
+              on_interval=on_interval if main else None,
+              on_update=on_update if main and cfg.progress else None)
+    total = time.time() - t0
+    if logger is None:
+        print(f"process {jax.process_index()} done: {remaining:,} steps in {total / 60:.1f} min")
+        return {}
+    logger.close()
+    last = logger.last
+    print(f"done: {cfg.num_timesteps:,} steps in {total / 60:.1f} min; last evaluation: "
+          f"success {last.get('success_rate', math.nan):.0%}, distance {last.get('final_distance', math.nan):.2f} m, "
+          f"return {last.get('episode_return', math.nan):.1f}; checkpoints in {checkpoint_dir(run_dir)}")
+    return last

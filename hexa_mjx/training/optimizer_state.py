@@ -1,0 +1,20 @@
+"""Adam's state in checkpoints: its template, so a checkpoint's copy can be checked and restored.
+
+`hexa_mjx.training.ppo` optimizes with brax's PPO optimizer, `optax.adam` chained after gradient clipping,
+and hands each checkpoint Adam's part of that state (`ppo.adam_of`); a resume puts it back
+(`ppo.with_adam`), so Adam's moments and step count go on where they stopped. What a resume still
+does not restore, and why it is not bit-exact: the keys of the interrupted run and the episodes its
+environments were in (docs/RESULTS.md, "Reliability").
+"""
+
+from __future__ import annotations
+
+import optax
+
+
+def adam_template(params_template, lr: float = 1e-3):
+    """Adam's state for (normalizer, policy, value) params, as PPO optimizes them."""
+    from brax.training.agents.ppo import losses
+
+    _, policy, value = params_template
+    return optax.adam(lr).init(losses.PPONetworkParams(policy=policy, value=value))

@@ -1,0 +1,150 @@
+"""What a training run tells its user: metrics.jsonl rows, TensorBoard scalars, console lines."""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING, Callable
+
+from hexa_mjx.tasks import task_class
+
+if TYPE_CHECKING:
+    from hexa_mjx.training.config import TrainConfig
+
+PROGRESS_INTERVAL_S = 15.0  # at most this long without a console line while training
+
+def summarize(metrics: dict) -> dict:
+    """The figures a user watches, from brax's eval metrics (per-episode sums, averaged)."""
+    get = lambda k: float(metrics.get(f"eval/episode_{k}", math.nan))  # noqa: E731
+    return {
+        "episode_return": get("reward"),
+        "final_distance": get("final_distance"),
+        "success_rate": get("final_success"),
+        "goal_bonus": get("goal_bonus"),
+        "fall_rate": get("fell"),
+        "nonfinite_rate": get("nonfinite"),
+        "goals_per_episode": get("goals_reached"),
+        "episode_length": float(metrics.get("eval/avg_episode_length", math.nan)),
+    }
+
+
+def keep_rows_up_to(run_dir: Path, step: int) -> set[int]:
+    """Rewrite metrics.jsonl with one row per evaluation step up to `step` (the checkpoint a run
+    resumes from): rows of a later step, written before a crash lost their checkpoint, would be
+    written again, and a duplicate step is kept once. Returns the steps kept."""
+    path = Path(run_dir) / "metrics.jsonl"
+    if not path.is_file():
+        return set()
+    kept, lines = set(), []
+    for line in path.read_text().splitlines():
+        try:
+            row = json.loads(line)
+        except json.JSONDecodeError:  # a line cut short by a crash
+            continue
+        if row.get("step", math.inf) <= step and row["step"] not in kept:
+            kept.add(row["step"])
+            lines.append(json.dumps(row))
+    tmp = path.with_suffix(".jsonl.tmp")
+    tmp.write_text("".join(line + "\n" for line in lines))
+    tmp.replace(path)
+    return kept
+
+
+class Logger:
+    """metrics.jsonl rows, TensorBoard scalars and one console line per evaluation; between
+    evaluations a progress line at least every PROGRESS_INTERVAL_S, and lines that say when the
+    programs are compiling."""
+
+    def __init__(self, run_dir: Path, cfg: TrainConfig, start_step: int, interval_s: float = PROGRESS_INTERVAL_S):
+        from tensorboardX import SummaryWriter
+
+        self.path = Path(run_dir) / "metrics.jsonl"
+        self.tb = SummaryWriter(str(Path(run_dir) / "tb"))
+        self.cfg, self.start_step, self.t0 = cfg, start_step, time.time()
+        self.interval_s = interval_s
+        self.last = {}
+        self.phase, self.phase_t0 = "", self.t0
+        self.last_line_t, self.last_line_step = self.t0, start_step
+        self.first_update_s = None
+        self.evaluation_t0, self.evaluation_ran = None, False  # when the first evaluation started; whether it ran
+
+    def compiling(self, evaluation_first: bool = True) -> None:
+        """Say that the programs are being compiled (or loaded from cache): the evaluation's first
+        when the run evaluates before training, else the training's."""
+        self.phase = "evaluation" if evaluation_first else "training"
+        self.phase_t0 = time.time()
+        print(f"compiling the environment and {self.phase} programs (1-3 min on a 2-core CPU the first time; "
+              "seconds when the compile cache has them) ...", flush=True)
+
+    def evaluating(self) -> None:
+        """An evaluation starts: the first one compiles its program."""
+        if self.evaluation_t0 is None and not self.evaluation_ran:
+            self.evaluation_t0 = self.phase_t0 if self.phase == "evaluation" else time.time()
+
+    def progress(self, step: int, episode_return: Callable[[], float]) -> None:
+        """An update has run (`hexa_mjx.training.ppo`): the run is at `step` env steps, and `episode_return()`
+        reads the mean of the training environments' latest finished returns. Prints a line at most
+        every `interval_s`, and says when the training program has compiled and run once."""
+        now = time.time()
+        if self.phase == "training":
+            self.first_update_s = now - self.phase_t0
+            print(f"training compiled and its first update ran in {self.first_update_s:.0f} s "
+                  f"({now - self.t0:.0f} s since the start)", flush=True)
+            self.phase = ""
+            self.last_line_t, self.last_line_step = now, step
+            return
+        if now - self.last_line_t < self.interval_s or step <= self.last_line_step:
+            return
+        rate = (step - self.last_line_step) / (now - self.last_line_t)
+        left = max(self.cfg.num_timesteps - step, 0) / rate if rate > 0 else math.nan
+        print(f"  step {step:>9,}/{self.cfg.num_timesteps:,}  {rate:7.0f} steps/s  left {fmt_time(left)}  "
+              f"training episodes' return {episode_return():8.1f}", flush=True)
+        self.last_line_t, self.last_line_step = now, step
+
+    def __call__(self, step: int, metrics: dict) -> None:
+        elapsed = time.time() - self.t0
+        done = step - self.start_step
+        rate = done / elapsed if done > 0 and elapsed > 0 else math.nan
+        row = {"step": step, "walltime_s": round(elapsed, 2), "env_steps_per_s": rate, **summarize(metrics),
+               **{k: float(v) for k, v in metrics.items()
+                  if k.startswith(("eval/episode_reward/", "curriculum/", "leg_failure/"))}}
+        with open(self.path, "a") as f:
+            f.write(json.dumps(row) + "\n")
+        for key, value in row.items():
+            if key != "step" and isinstance(value, float) and math.isfinite(value):
+                self.tb.add_scalar(key.replace("eval/episode_", ""), value, step)
+        self.tb.flush()
+        self.evaluated(step)
+        left = max(self.cfg.num_timesteps - step, 0) / rate if math.isfinite(rate) and rate > 0 else math.nan
+        task_figure = task_class(self.cfg.task).progress_figure(row)
+        print(f"step {step:>9,}/{self.cfg.num_timesteps:,}  {rate:7.0f} steps/s  left {fmt_time(left)}  "
+              f"return {row['episode_return']:8.1f}  distance {row['final_distance']:.2f} m  "
+              f"success {row['success_rate']:.0%}  {task_figure}  falls {row['fall_rate']:.0%}"
+              + (f"  non-finite {row['nonfinite_rate']:.0%}" if row["nonfinite_rate"] > 0 else "")
+              + (f"  curriculum level {row['curriculum/level_mean']:.1f} (top {row['curriculum/top_level_share']:.0%})"
+                 if "curriculum/level_mean" in row else ""), flush=True)
+        self.last = row
+
+    def evaluated(self, step: int) -> None:
+        """An evaluation has run and its row is written; the first one says that the evaluation
+        program is ready (and, before training, that the training one is compiling)."""
+        now = time.time()
+        if self.evaluation_t0 is not None:
+            before_training = self.phase == "evaluation"
+            print(f"evaluation compiled and run in {now - self.evaluation_t0:.0f} s"
+                  + ("; compiling the training programs ..." if before_training else ""), flush=True)
+            self.evaluation_t0, self.evaluation_ran = None, True
+            if before_training:
+                self.phase, self.phase_t0 = "training", now
+        self.last_line_t, self.last_line_step = now, step
+
+    def close(self):
+        self.tb.close()
+
+
+def fmt_time(seconds: float) -> str:
+    if not math.isfinite(seconds):
+        return "  --:--"
+    return f"{int(seconds // 60):4d}:{int(seconds % 60):02d}"
