@@ -19,6 +19,12 @@ import tempfile
 import time
 from pathlib import Path
 
+try:
+    from hexa_mjx import cli
+except ImportError as e:  # a MUJOCO_GL that MuJoCo cannot use
+    print(f"error: {e}", file=sys.stderr)
+    sys.exit(2)
+
 
 def parse_args(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -27,54 +33,24 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--seed", type=int, default=0, help="seed of the first episode's start and goals")
     p.add_argument("--json", default="", help="write per-episode results and a summary to this file")
     p.add_argument("--video", default="", help="MP4 of the first episode (default play-<policy name>.mp4)")
-    p.add_argument("--no_video", action="store_true", help="write no video")
+    p.add_argument("--no_video", "--no-video", action="store_true", help="write no video")
     p.add_argument("--viewer", action="store_true", help="open MuJoCo's interactive viewer (needs a display)")
     p.add_argument("--model", default=None, help="MJCF model (default: the project's models/hexapod.xml)")
-    p.add_argument("--episode_length", type=int, default=None, help="control steps per episode (default: trained)")
-    p.add_argument("--goal_distance", type=float, default=None, help="goal task: m ahead of the start")
-    p.add_argument("--goal_min_distance", type=float, default=None, help="navigate: m, nearest goal drawn")
-    p.add_argument("--goal_max_distance", type=float, default=None, help="navigate: m, farthest goal drawn")
-    p.add_argument("--waypoints", default="", help='navigate: a path "x,y x,y ..." in m from the start, or a file')
-    p.add_argument("--start_joint_noise", type=float, default=None, help="rad, start-angle noise (default: trained)")
-    p.add_argument("--start_yaw_noise", type=float, default=None, help="goal task: rad, start-heading noise")
     p.add_argument("--randomize", action="store_true", help="a randomized physics model every episode (friction, "
                    "masses, payload, servo gains and limits, damping, armature: hexa_mjx.mdp.randomization.Ranges)")
-    p.add_argument("--push_speed", type=float, default=None, help="m/s, planar kicks to the torso (default: trained)")
-    p.add_argument("--push_interval", type=float, default=None, help="s between kicks")
-    p.add_argument("--action_latency", type=float, default=None, help="control steps (0-1) of command delay")
-    p.add_argument("--obs_noise", type=float, default=None, help="observation noise level (1: Playground's)")
-    p.add_argument("--disabled_legs", default="", help='legs whose servos fail, e.g. "3" or "1 4"')
-    p.add_argument("--failure_mode", default=None, choices=["limp", "locked"], help="how a failed leg fails")
-    # No choices= here: hexa_mjx is imported only after the arguments (an unusable MUJOCO_GL stops
-    # that import with one line); EnvConfig rejects an unknown kind with the list.
-    p.add_argument("--terrain", default=None,
-                   help="ground: flat, bumps, slopes, steps or mixed (hexa_mjx.mdp.terrain; default: the policy's)")
-    p.add_argument("--terrain_seed", type=int, default=None, help="seed of the generated terrain (default: 0)")
-    p.add_argument("--terrain_difficulty", type=float, default=None, help="terrain sizes as a fraction, 0 to 1")
+    cli.add_env_flags(p, unset="the policy's own")
     p.add_argument("--solver", default="trained", choices=["trained", "default"],
                    help="'trained': the model's fast solver setting (1 iteration); 'default': MuJoCo's default "
                         "accuracy (100 iterations, 50 line-search), the sim-to-sim check")
     p.add_argument("--benchmark", action="store_true", help="time the policy alone (one observation per call, "
                    "one thread) and exit")
-    args = p.parse_args(argv)
+    args = p.parse_args(cli.signed_values(sys.argv[1:] if argv is None else list(argv)))
     if args.episodes < 1:
         p.error(f"--episodes must be at least 1, got {args.episodes}")
     if args.viewer and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
         p.error("--viewer needs a display, and neither DISPLAY nor WAYLAND_DISPLAY is set: run without --viewer "
                 "to write an MP4, or start it under a display (for example `xvfb-run python play.py ...`)")
     return args
-
-
-def waypoints_of(text: str) -> tuple:
-    """Waypoints from "x,y x,y ..." or a file holding that text."""
-    if not text:
-        return ()
-    if Path(text).is_file():
-        text = Path(text).read_text()
-    try:
-        return tuple(tuple(float(c) for c in point.split(",")) for point in text.replace("\n", " ").split())
-    except ValueError:
-        raise ValueError(f'waypoints are "x,y x,y ..." in metres, got {text!r}') from None
 
 
 def onnx_file(policy: str, scratch: str) -> Path:
@@ -107,22 +83,9 @@ def main(argv=None) -> int:
     try:
         with tempfile.TemporaryDirectory() as scratch:
             policy = player.OnnxPolicy(onnx_file(args.policy, scratch))
-        overrides = dict(episode_length=args.episode_length, goal_distance=args.goal_distance,
-                         goal_min_distance=args.goal_min_distance, goal_max_distance=args.goal_max_distance,
-                         start_joint_noise=args.start_joint_noise, start_yaw_noise=args.start_yaw_noise,
-                         waypoints=waypoints_of(args.waypoints) or None, push_speed=args.push_speed,
-                         push_interval=args.push_interval, failure_mode=args.failure_mode,
-                         action_latency=args.action_latency, obs_noise=args.obs_noise, terrain=args.terrain,
-                         terrain_seed=args.terrain_seed, terrain_difficulty=args.terrain_difficulty)
+        overrides = cli.env_overrides(args)
         if args.solver == "default":
             overrides.update(solver_iterations=100, ls_iterations=50)  # MuJoCo's defaults
-        if args.disabled_legs:
-            try:
-                overrides.update(disabled_legs=tuple(int(x) for x in args.disabled_legs.replace(",", " ").split()),
-                                 leg_failure="none")
-            except ValueError:
-                raise ValueError(f'--disabled_legs takes leg numbers from 1, like "3" or "1 4", got '
-                                 f'{args.disabled_legs!r}') from None
         if args.waypoints and not TASKS[policy.metadata["task"]].follows_waypoints:
             raise ValueError(f"--waypoints need a task that follows a path; this is a {policy.metadata['task']}-task "
                              "policy")

@@ -90,9 +90,9 @@ EVAL_CASES = [
     (["--ckpt", POLICY, "--videos", "-1"], "--videos must be 0 or more"),
     (["--ckpt", POLICY, "--waypoints", "1,0 1"], "waypoint '1' is not x,y"),
     (["--ckpt", POLICY, "--waypoints", ""], "no waypoints"),
-    (["--ckpt", POLICY, "--waypoints", "1,0"], "waypoints need a navigation policy"),
+    (["--ckpt", POLICY, "--waypoints", "1,0"], "need a task that follows a path; the goal task does not"),
     (["--ckpt", POLICY, "--task", "fly"], "invalid choice: 'fly'"),
-    (["--ckpt", NAV_POLICY, "--task", "goal"], "cannot be run on the goal task"),
+    (["--ckpt", NAV_POLICY, "--task", "stand", "--waypoints", "1,0"], "the stand task does not"),
     (["--ckpt", NAV_POLICY, "--goal_min_distance", "-1"], "0 <= min <= max"),
     (["--ckpt", POLICY, "--disabled_legs", "7"], "leg"),
     (["--ckpt", POLICY, "--disabled_legs", "1 2 3 4 5 6"], "all"),
@@ -187,9 +187,9 @@ def test_train_rejects_a_resume_with_other_settings(tmp_path, capsys, nothing_co
     saved = dataclasses.asdict(config.TrainConfig(seed=3, reward="goal_directed", run_dir=str(run_dir)))
     (run_dir / "config.json").write_text(json.dumps(saved))
     before = sorted(p.name for p in run_dir.iterdir())
-    code, _ = run_main(train_script.main, ["--run_dir", str(run_dir), "--resume"])
+    code, _ = run_main(train_script.main, ["--run_dir", str(run_dir), "--resume", "--seed", "4"])
     err = capsys.readouterr().err
-    assert code == 2 and "holds a different run: seed=3" in err and one_error_line(err)
+    assert code == 2 and "holds a different run: seed=3" in err and "drop --seed" in err and one_error_line(err)
     assert sorted(p.name for p in run_dir.iterdir()) == before
     assert json.loads((run_dir / "config.json").read_text()) == saved
 

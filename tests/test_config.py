@@ -1,13 +1,15 @@
-"""train.py's flags, presets, the compile cache's folder and the time-to-success study's parsing."""
+"""train.py's flags, recipes, the compile cache's folder and the time-to-success study's parsing."""
 
 import dataclasses
 import json
+import tomllib
 
 import pytest
 
 from hexa_mjx.training import config, jax_setup
 from hexa_mjx.studies import time_to_success
 from hexa_mjx.tasks import reward_variants
+from hexa_mjx.training import recipes
 
 
 def test_flags_and_their_negations():
@@ -18,9 +20,52 @@ def test_flags_and_their_negations():
     assert default.compile_cache and default.progress and default.reward == "goal_directed"
 
 
-def test_preset_fills_only_what_the_command_line_leaves():
-    cfg = config.parse_args(["--preset", "paper", "--num_envs", "16"])
-    assert cfg.num_envs == 16 and cfg.unroll_length == config.PRESETS["paper"]["unroll_length"]
+def test_recipe_fills_only_what_the_command_line_leaves():
+    cfg = config.parse_args(["--preset", "paper", "--num_envs", "16"])  # the old spelling of --recipe
+    paper = tomllib.loads((recipes.RECIPES_DIR / "paper.toml").read_text())["settings"]
+    assert cfg.recipe == "paper" and cfg.num_envs == 16 and cfg.unroll_length == paper["unroll_length"] == 8
+
+
+@pytest.mark.parametrize("name", recipes.names())
+def test_every_recipe_names_known_settings_and_says_what_it_is_for(name):
+    assert recipes.description(name)
+    cfg = config.parse_args(["--recipe", name])
+    for key, value in recipes.load(name, config.FIELDS).items():
+        assert getattr(cfg, key) == value, key
+
+
+def test_bad_recipes_are_one_clear_error(tmp_path, capsys):
+    broken = tmp_path / "broken.toml"
+    broken.write_text("[settings]\nnum_envs = ")
+    unknown = tmp_path / "unknown.toml"
+    unknown.write_text("[settings]\nwarp_speed = 9")
+    for recipe, message in (("nope", "no recipe 'nope'"), (str(broken), "is not valid TOML"),
+                            (str(unknown), "unknown setting(s) ['warp_speed']")):
+        with pytest.raises(SystemExit):
+            config.parse_args(["--recipe", recipe])
+        assert message in capsys.readouterr().err
+
+
+def test_resume_takes_the_runs_own_settings(tmp_path):
+    run_dir = tmp_path / "run"
+    first = config.validate(config.parse_args(["--recipe", "fast", "--num_timesteps", "400000", "--seed", "2",
+                                               "--run_dir", str(run_dir)]))
+    (run_dir / "config.json").write_text(json.dumps(dataclasses.asdict(first)))
+    resumed = config.parse_args(["--run_dir", str(run_dir), "--resume"])
+    assert dataclasses.replace(resumed, resume=False) == first
+    # A recipe given on resume never replaces the run's step budget; a flag may extend it.
+    again = config.parse_args(["--run_dir", str(run_dir), "--resume", "--recipe", "fast"])
+    assert again.num_timesteps == 400_000 and again.num_evals == first.num_evals
+    assert config.parse_args(["--run_dir", str(run_dir), "--resume", "--num_timesteps", "800000"]).num_timesteps == 800_000
+    (run_dir / "config.json").write_text("{")
+    with pytest.raises(SystemExit):
+        config.parse_args(["--run_dir", str(run_dir), "--resume"])
+
+
+def test_help_shows_the_groups():
+    text = config.build_parser().format_help()
+    for group in config.GROUPS:
+        assert f"\n{group}:\n" in text
 
 
 def test_compile_cache_folder_is_per_user_and_keyed(monkeypatch, tmp_path):
@@ -56,7 +101,7 @@ def test_time_to_success_reports_finished_runs(tmp_path, capsys):
 
 def test_time_to_success_configurations():
     assert time_to_success.parse_config("e4=--update_epochs 4 --lr 1e-3") == ("e4", ["--update_epochs", "4", "--lr", "1e-3"])
-    assert time_to_success.parse_config("paper") == ("paper", ["--preset", "paper"])
+    assert time_to_success.parse_config("paper") == ("paper", ["--recipe", "paper"])
     with pytest.raises(SystemExit, match="unknown configuration"):
         time_to_success.parse_config("quick")
 

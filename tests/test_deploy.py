@@ -194,7 +194,7 @@ def test_play_bad_input_is_one_line(tmp_path):
         (str(tmp_path / "junk.onnx"),): "not a readable ONNX model",
         (str(tmp_path / "missing.onnx"),): "neither an ONNX file",
         ("policies/goal.onnx", "--waypoints", "1,0"): "need a task that follows a path",
-        ("policies/navigate.onnx", "--waypoints", "1,x"): "waypoints are",
+        ("policies/navigate.onnx", "--waypoints", "1,x"): "is not x,y",
         ("policies/goal.onnx", "--episodes", "0"): "--episodes must be at least 1",
         ("policies/goal.onnx", "--goal_distance", "-1"): "goal_distance must be",
         ("policies/goal.onnx", "--terrain", "bumps", "--terrain_difficulty", "2"): "terrain_difficulty is a fraction",

@@ -10,6 +10,7 @@ from hexa_mjx.evaluation import nav_metrics
 from hexa_mjx.mdp import rewards
 from hexa_mjx.robot.kinematics import quat_mul, rotate, yaw
 from hexa_mjx.engines.mjx_env import DRAWS
+from hexa_mjx import cli
 from hexa_mjx.tasks import reward_variants
 
 
@@ -144,14 +145,14 @@ def test_bad_settings_are_rejected(overrides, message):
                                            ("1,0,2", "is not x,y"), ("nan,0", "not finite")])
 def test_bad_waypoints_are_rejected(text, message):
     with pytest.raises(ValueError, match=message):
-        nav_metrics.parse_waypoints(text)
+        cli.parse_waypoints(text)
 
 
 def test_waypoints_parse_from_text_and_file(tmp_path):
-    assert nav_metrics.parse_waypoints("1,0 1,1; 0,1") == [(1.0, 0.0), (1.0, 1.0), (0.0, 1.0)]
+    assert cli.parse_waypoints("1,0 1,1; 0,1") == [(1.0, 0.0), (1.0, 1.0), (0.0, 1.0)]
     path = tmp_path / "square.txt"
     path.write_text("1,0\n1,1\n0,1\n0,0\n")
-    assert nav_metrics.parse_waypoints(str(path)) == [(1.0, 0.0), (1.0, 1.0), (0.0, 1.0), (0.0, 0.0)]
+    assert cli.parse_waypoints(str(path)) == [(1.0, 0.0), (1.0, 1.0), (0.0, 1.0), (0.0, 0.0)]
 
 
 def _straight_walk(goal_xy, heading_rad, steps, speed_per_step, radius=0.5):

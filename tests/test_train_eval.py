@@ -16,6 +16,7 @@ import pytest
 
 from hexa_mjx.training import checkpoints, config, loop as training
 from hexa_mjx.evaluation import evaluate as evaluation, video
+from hexa_mjx.evaluation import table
 
 from conftest import NOISE, TINY, run  # noqa: E402  (the shared tiny run: tests/conftest.py)
 
@@ -192,8 +193,8 @@ def test_episode_table_phases_average_over_episodes_that_have_them():
     # Episode 1 has 3 points on the floor at every step: as many as this physics keeps.
     assert summary["contact_points_max"] == 3 and summary["steps_at_contact_cap"] == 4 and summary["steps"] == 8
     assert re.search(r"floor contact points at once, most +3 \(physics keeps 3; at that cap in 4 of 8 steps\)",
-                     evaluation.format_table(summary))
-    assert re.search(r"steps to the goal, mean of successes +1\n", evaluation.format_table(summary))
+                     table.format_table(summary))
+    assert re.search(r"steps to the goal, mean of successes +1\n", table.format_table(summary))
 
 
 def test_contact_groups(env):

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from hexa_mjx.robot import constants as robot
+from hexa_mjx import atomic
 
 METADATA_KEY = "hexa_mjx"
 FORMAT = 1  # bumped when the metadata's meaning changes
@@ -140,12 +141,8 @@ def export(ckpt: str | Path, out: str | Path) -> Path:
     env = config.make_env_for(cfg)
     step, params = checkpoints.load_checkpoint(ckpt_dir, training.init_params(cfg, env))
     model = onnx_model(policy_arrays(cfg.policy_dist, params), deployment_metadata(env, cfg, step, str(ckpt_dir)))
-    out.parent.mkdir(parents=True, exist_ok=True)
-    for path, data in ((out, model.SerializeToString()),
-                       (out.with_suffix(".json"), json.dumps(metadata_of(model), indent=1).encode())):
-        tmp = path.with_name(path.name + ".tmp")
-        tmp.write_bytes(data)
-        tmp.replace(path)  # atomic: a reader never sees half a file
+    atomic.write(out, model.SerializeToString())
+    atomic.write(out.with_suffix(".json"), json.dumps(metadata_of(model), indent=1))
     return out
 
 

@@ -18,6 +18,7 @@ from hexa_mjx.mdp.config import EnvConfig, make_config
 from hexa_mjx.deploy.export import FORMAT, METADATA_KEY
 from hexa_mjx.engines.native import NativeEnv
 from hexa_mjx.tasks import TASKS
+from hexa_mjx import atomic
 
 
 class OnnxPolicy:
@@ -136,10 +137,7 @@ def write_json(path: Path, policy: OnnxPolicy, env: NativeEnv, episodes: list[di
     doc = {"policy": str(policy.path), "task": env.config.task, "engine": "mujoco (native C)",
            "model": env.config.model_path, "model_matches_training": model_matches(policy, env),
            "summary": summarize(episodes), "episodes": rows}
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(doc, indent=1))
-    tmp.replace(path)
+    atomic.write(path, json.dumps(doc, indent=1))
 
 
 def inference_rates(policy: OnnxPolicy, obs: np.ndarray, calls: int = 2000, repeats: int = 5) -> list[float]:

@@ -22,6 +22,7 @@ from hexa_mjx.engines import wrappers
 from hexa_mjx.robot.model import servo_power
 from hexa_mjx.evaluation.video import render_video
 from hexa_mjx.tasks import task_class
+from hexa_mjx import atomic
 
 
 CONTACT_GROUPS = ("torso", "hip and knee links", "shins", "feet")
@@ -190,67 +191,6 @@ def episode_table(env, start_qpos, traj) -> dict:
     return {"summary": summary, "per_episode": per_episode}
 
 
-def format_table(summary: dict) -> str:
-    rows = [("episodes", f"{summary['episodes']}"), ("success rate", f"{summary['success_rate']:.1%}"),
-            ("final distance, mean", f"{summary['final_distance_mean']:.3f} m"),
-            ("final distance, median", f"{summary['final_distance_median']:.3f} m"),
-            ("minimum distance, mean", f"{summary['min_distance_mean']:.3f} m"),
-            ("goal bonus, mean", f"{summary['goal_bonus_mean']:.1f}"),
-            ("return, mean +- std", f"{summary['return_mean']:.1f} +- {summary['return_std']:.1f}"),
-            ("fall rate", f"{summary['fall_rate']:.1%}"),
-            ("non-finite physics endings", f"{summary['nonfinite_rate']:.1%}"),
-            ("mean speed", f"{summary['mean_speed']:.3f} m/s"),
-            ("episode length, mean", f"{summary['episode_length_mean']:.0f} steps")]
-    steps = summary["steps_to_goal_mean"]
-    rows.append(("steps to the goal, mean of successes", "-" if steps is None else f"{steps:.0f}"))
-    if "body_contact_before_goal_mean" in summary:
-        rows.append(("body contact before the goal, mean", f"{summary['body_contact_before_goal_mean']:.1f}"))
-    for phase in ("before_goal", "after_goal"):
-        if f"contacts_{phase}" in summary:
-            counts = summary[f"contacts_{phase}"]
-            counts = "-" if counts is None else ", ".join(f"{k} {v:.2f}" for k, v in counts.items())
-            rows.append((f"floor contacts per step, {phase.replace('_', ' ')}", counts))
-    if "contact_points_max" in summary:
-        cap = summary["contact_cap"]
-        kept = (f"physics keeps {cap}; at that cap in {summary['steps_at_contact_cap']:,} of {summary['steps']:,} "
-                "steps" if cap else "physics keeps every contact")
-        rows.append(("floor contact points at once, most", f"{summary['contact_points_max']} ({kept})"))
-    if "feet_only_steps" in summary:
-        rows.append(("steps with only feet on the floor", f"{summary['feet_only_steps']:.2%}"))
-    if "gait" in summary:
-        rows += gait.table_rows(summary["gait"])
-    rows += navigation_rows(summary)
-    rows += [(f"  reward/{k}, per episode", f"{v:.1f}") for k, v in summary["reward_terms"].items()]
-    width = max(len(k) for k, _ in rows)
-    return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
-
-
-def navigation_rows(summary: dict) -> list[tuple[str, str]]:
-    """Table rows of the navigation task: per-sector and per-band success, goals, speed; or a path."""
-    pct = lambda x: "-" if x is None else f"{x:.1%}"  # noqa: E731
-    num = lambda x, fmt: "-" if x is None else format(x, fmt)  # noqa: E731
-    rows = []
-    if "navigation" in summary:
-        nav = summary["navigation"]
-        rows.append(("first goal reached", pct(nav["first_goal_success"])))
-        for key, title in (("sectors", "  bearing"), ("bands", "  distance")):
-            rows += [(f"{title} {label}", f"{pct(v['success'])} of {v['goals']}") for label, v in nav[key].items()]
-        rows += [("goals reached per episode, mean (min)",
-                  f"{nav['goals_per_episode_mean']:.2f} ({nav['goals_per_episode_min']})"),
-                 ("seconds per metre of goal distance", num(nav["seconds_per_metre"], ".2f")),
-                 ("speed toward the goal", f"{num(nav['speed_to_goal'], '.3f')} m/s = "
-                                           f"{num(nav['speed_to_goal_body_lengths'], '.2f')} torso lengths/s"),
-                 ("heading error on arrival, mean", f"{num(nav['heading_error_deg_mean'], '.0f')} deg")]
-    if "waypoints" in summary:
-        path = summary["waypoints"]
-        rows += [("waypoints", " ".join(f"{x:g},{y:g}" for x, y in path["waypoints"])),
-                 ("path completed", pct(path["completed_rate"])),
-                 ("arrival at each waypoint, mean", ", ".join(num(t, ".1f") + " s" for t in path["arrival_s_mean"])),
-                 ("largest deviation from the path, mean (median)",
-                  f"{path['max_deviation_mean']:.3f} m ({path['max_deviation_median']:.3f} m)")]
-    return rows
-
-
 def evaluate(ckpt: str | Path, episodes: int = 128, videos: int = 1, out: str | Path | None = None,
              seed: int = 0, video: bool = True, task: str | None = None, shadows: bool = False,
              randomize: bool = False, **env_overrides) -> dict:
@@ -266,8 +206,8 @@ def evaluate(ckpt: str | Path, episodes: int = 128, videos: int = 1, out: str | 
     cfg = config.load_config(run_dir)
     overrides = {k: v for k, v in env_overrides.items() if v is not None}
     if overrides.get("waypoints") and not task_class(task or cfg.task).follows_waypoints:
-        raise ValueError(f"waypoints need a navigation policy; {run_dir} holds a {cfg.task} policy "
-                         "(add --task navigate to try the report's policy on them)")
+        raise ValueError(f"--waypoints need a task that follows a path; the {task or cfg.task} task does not "
+                         "(add --task navigate to try this policy on a path)")
     env = config.make_env_for(cfg, task=task or "", **overrides)
     out = Path(out) if out else run_dir / "eval"
     check_writable(out)
@@ -293,9 +233,7 @@ def evaluate(ckpt: str | Path, episodes: int = 128, videos: int = 1, out: str | 
             path = out / f"episode_{i}.mp4"
             render_video(env, frames, path, goals, env.config.waypoints, shadows=shadows)
             result["videos"].append(str(path))
-    tmp = out / "metrics.json.tmp"
-    tmp.write_text(json.dumps(result, indent=1))
-    tmp.replace(out / "metrics.json")
+    atomic.write(out / "metrics.json", json.dumps(result, indent=1))
     return result
 
 

@@ -151,28 +151,32 @@ def segment_distance(p, a, b) -> np.ndarray:
     return np.linalg.norm(p - (a + t[:, None] * ab), axis=1)
 
 
-def parse_waypoints(text: str) -> list[tuple[float, float]]:
-    """Waypoints from "x,y x,y ..." (metres), or from a file holding that text (one or more lines)."""
-    source = text
-    if text and Path(text).is_file():
-        source = Path(text).read_text()
-    tokens = source.replace(";", " ").split()
-    if not tokens:
-        raise ValueError(f"no waypoints in {text!r}; give them as \"x,y x,y ...\" in metres, e.g. \"1,0 1,1 0,1 0,0\"")
-    points = []
-    for token in tokens:
-        parts = token.split(",")
-        try:
-            x, y = (float(p) for p in parts)
-        except ValueError:
-            raise ValueError(f"waypoint {token!r} is not x,y in metres; give them as \"x,y x,y ...\", "
-                             "e.g. \"1,0 1,1 0,1 0,0\"") from None
-        if not (np.isfinite(x) and np.isfinite(y)):
-            raise ValueError(f"waypoint {token!r} is not finite")
-        points.append((x, y))
-    return points
-
-
 def body_length(env) -> float:
     """Length of the torso box along its forward axis, m."""
     return 2.0 * float(env.mj_model.geom(robot.TORSO_GEOM).size[0])
+
+
+def table_rows(summary: dict) -> list[tuple[str, str]]:
+    """eval.py's rows of the navigation figures: per-sector and per-band success, goals, speed; or a path."""
+    pct = lambda x: "-" if x is None else f"{x:.1%}"  # noqa: E731
+    num = lambda x, fmt: "-" if x is None else format(x, fmt)  # noqa: E731
+    rows = []
+    if "navigation" in summary:
+        nav = summary["navigation"]
+        rows.append(("first goal reached", pct(nav["first_goal_success"])))
+        for key, title in (("sectors", "  bearing"), ("bands", "  distance")):
+            rows += [(f"{title} {label}", f"{pct(v['success'])} of {v['goals']}") for label, v in nav[key].items()]
+        rows += [("goals reached per episode, mean (min)",
+                  f"{nav['goals_per_episode_mean']:.2f} ({nav['goals_per_episode_min']})"),
+                 ("seconds per metre of goal distance", num(nav["seconds_per_metre"], ".2f")),
+                 ("speed toward the goal", f"{num(nav['speed_to_goal'], '.3f')} m/s = "
+                                           f"{num(nav['speed_to_goal_body_lengths'], '.2f')} torso lengths/s"),
+                 ("heading error on arrival, mean", f"{num(nav['heading_error_deg_mean'], '.0f')} deg")]
+    if "waypoints" in summary:
+        path = summary["waypoints"]
+        rows += [("waypoints", " ".join(f"{x:g},{y:g}" for x, y in path["waypoints"])),
+                 ("path completed", pct(path["completed_rate"])),
+                 ("arrival at each waypoint, mean", ", ".join(num(t, ".1f") + " s" for t in path["arrival_s_mean"])),
+                 ("largest deviation from the path, mean (median)",
+                  f"{path['max_deviation_mean']:.3f} m ({path['max_deviation_median']:.3f} m)")]
+    return rows

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from hexa_mjx.robot import constants as robot
+from hexa_mjx import atomic
 
 GL_PACKAGES = "libegl1 libegl-mesa0 libosmesa6"  # Debian/Ubuntu
 VIDEO_FPS = 30  # frames per second of videos (real time: every ctrl_hz / 30th control step)
@@ -45,14 +46,12 @@ def render_video(env, qpos_frames: np.ndarray, path: Path, goals: np.ndarray, wa
             "or pass --no-video") from e
     corners = np.vstack([qpos_frames[0, :2], np.asarray(waypoints, float).reshape(-1, 2) + env.qpos0[:2]])
     stride = max(int(round(1 / (env.dt * fps))), 1)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.stem + ".tmp" + path.suffix)
     written = 0
     # The encoder is an ffmpeg subprocess. JAX warns on any fork in a threaded process; subprocess's
     # fork is followed at once by exec in C, which is safe, so that warning is noise here.
     warnings.filterwarnings("ignore", message=r"os\.fork\(\) was called", category=RuntimeWarning)
-    with imageio.get_writer(tmp, fps=1 / (env.dt * stride), codec="libx264", quality=7,
-                            macro_block_size=16) as writer:
+    with atomic.replacing(path) as tmp, imageio.get_writer(tmp, fps=1 / (env.dt * stride), codec="libx264",
+                                                            quality=7, macro_block_size=16) as writer:
         for qpos, goal in zip(qpos_frames[::stride], goals[::stride]):
             data.qpos[:] = qpos
             data.mocap_pos[mocap, :2] = goal
@@ -65,7 +64,6 @@ def render_video(env, qpos_frames: np.ndarray, path: Path, goals: np.ndarray, wa
             writer.append_data(renderer.render())
             written += 1
     renderer.close()
-    tmp.replace(path)
     return written
 
 

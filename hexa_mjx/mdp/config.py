@@ -12,17 +12,25 @@ from hexa_mjx.robot import constants as robot
 from hexa_mjx.mdp.terrain import KINDS as TERRAINS, LEVEL_TILES
 
 
+def setting(default, help: str, **meta):
+    """A field with its help (and argparse metadata: choices, nargs, type), shown by every command."""
+    if isinstance(default, (list, tuple, dict)):
+        return dataclasses.field(default_factory=lambda: type(default)(default), metadata={"help": help, **meta})
+    return dataclasses.field(default=default, metadata={"help": help, **meta})
+
+
 @dataclasses.dataclass(frozen=True)
 class EnvConfig:
-    """Environment settings; `make_env(**overrides)` sets any of them by name."""
+    """Environment settings; `make_env(**overrides)` sets any of them by name. Fields with help are
+    the command-line flags of train.py, eval.py and play.py (hexa_mjx.cli)."""
 
     task: str = "goal"  # a key of hexa_mjx.tasks.TASKS
-    reward: str = ""  # a key of rewards.VARIANTS valid for the task; "": the task's own
+    reward: str = ""  # a reward variant of the task (hexa_mjx.tasks); "": the task's own
     ablate: tuple[str, ...] = ()  # keys of rewards.ABLATIONS whose terms are zeroed
     reward_scales: dict = dataclasses.field(default_factory=dict)  # per-term scale overrides
     model_path: str = str(robot.MODEL_XML)
-    ctrl_hz: float = 60.0  # Hz, policy rate; 240 Hz physics / ctrl_hz must be whole
-    episode_length: int = 1000  # control steps
+    ctrl_hz: float = setting(60.0, "control rate, Hz (240 / whole number)")
+    episode_length: int = setting(1000, "control steps per episode")
     success_radius: float = 0.5  # m
     # The goal bonus is paid only while nothing but the feet touches the floor. The report pays it
     # for being within the radius; with that, policies reached the goal, then rested on their shins
@@ -32,55 +40,55 @@ class EnvConfig:
     lift_clearance: float = 0.02  # m, foot height above which a leg's floor contact is "bad"
     settle_steps: int = 100  # physics steps the start pose settles before the first observation
     # Start-state noise, drawn per reset (the report starts every episode from the same pose).
-    start_joint_noise: float = 0.0  # rad, each joint's start angle is offset uniformly in +-this
-    start_yaw_noise: float = 0.0  # rad, the start heading is turned uniformly in +-this (navigate: always pi)
+    start_joint_noise: float = setting(0.0, "rad, uniform noise on each joint's start angle, drawn per episode "
+                                            "(0: the report's fixed start)")
+    start_yaw_noise: float = setting(0.0, "rad, uniform noise on the start heading, drawn per episode (tasks that "
+                                          "start from any heading ignore it)")
     solver_iterations: int | None = None  # None: the model's own setting
     ls_iterations: int | None = None
     # MJX gives every robot-floor geom pair fixed contact slots (40 on the report's hexapod: box 4,
     # capsules 2, spheres 1) and solves for all of them each step. N > 0 keeps only the N deepest
     # (MJX's `max_contact_points`); 0 keeps every slot. See docs/RESULTS.md, "Speed".
-    max_contact_points: int = 0
-    # Report task ("goal"): one goal this far ahead (+x) of the start.
-    goal_distance: float = 1.5  # m
-    # Navigation task ("navigate"): goals at a bearing uniform over 360 degrees from the torso and a
-    # distance uniform in [goal_min_distance, goal_max_distance]; a new one each time one is reached.
-    goal_min_distance: float = 0.5  # m
-    goal_max_distance: float = 3.0  # m
+    max_contact_points: int = setting(0, "MJX keeps only this many deepest robot-floor contacts per step "
+                                         "(0: all 40 slots)")
+    goal_distance: float = setting(1.5, "goal task: m, the goal's distance ahead (+x) of the start")
+    # Navigation: goals at a bearing uniform over 360 degrees from the torso and a distance uniform
+    # in [goal_min_distance, goal_max_distance]; a new one each time one is reached.
+    goal_min_distance: float = setting(0.5, "navigate: m, nearest goal distance drawn")
+    goal_max_distance: float = setting(3.0, "navigate: m, farthest goal distance drawn")
     # Navigation: the observed distance is capped here (0: goal_max_distance). A policy keeps the
     # cap it was trained with when evaluated on another range.
     goal_distance_cap: float = 0.0  # m
-    # Navigation, training only: a curriculum of this many levels (0: none) that opens the bearing
-    # and distance ranges per environment as it reaches goals (hexa_mjx.mdp.curriculum); on a terrain
-    # the level also picks the column of terrain squares it starts on (hexa_mjx.mdp.terrain).
-    curriculum_levels: int = 0
-    # Navigation: a fixed path instead of random goals, ((x, y), ...) in metres, world frame,
-    # relative to the start position. The last waypoint stays the goal once reached.
-    waypoints: tuple = ()
-    # Leg failure: a failed leg's three servos stop working. "limp": no torque; "locked": held at the
-    # start pose's angles. `disabled_legs` fails these legs (1-based) in every episode; with
-    # `leg_failure="random"`, each episode fails one leg drawn uniformly, with probability
-    # `leg_failure_rate`; `leg_failure_weights` (one per leg) make some legs likelier to be the
-    # failed one. The policy is not told which leg failed.
-    disabled_legs: tuple = ()
-    leg_failure: str = "none"  # "none" | "random"
-    leg_failure_rate: float = 0.5  # probability that an episode has a failed leg (random)
-    leg_failure_weights: tuple = ()  # relative chance of each leg, legs 1, 2, ... ((): uniform)
-    failure_mode: str = "limp"  # "limp" | "locked"
-    # Pushes: every `push_interval` s the torso's planar velocity gets a kick in a random direction
-    # of a speed uniform in [0, push_speed] m/s (0: no pushes).
-    push_speed: float = 0.0  # m/s
-    push_interval: float = 3.0  # s
-    # Action latency: each episode's commands reach the servos this late, uniform in [0, action_latency]
-    # control steps (at most 1), in whole physics steps; until then the previous command holds.
-    action_latency: float = 0.0  # control steps
-    # Observation noise: uniform in +-obs_noise x hexa_mjx.mdp.observations.NOISE_SCALES on joint angles and
-    # velocities and the torso's velocities (0: none; 1: Playground's locomotion levels).
-    obs_noise: float = 0.0
-    # Rough terrain (hexa_mjx.mdp.terrain): "flat" (the floor plane), "bumps", "slopes", "steps" or
-    # "mixed", generated at `terrain_seed`, its sizes scaled by `terrain_difficulty` (0 to 1).
-    terrain: str = "flat"
-    terrain_seed: int = 0
-    terrain_difficulty: float = 1.0
+    # Navigation, training only: hexa_mjx.mdp.curriculum; on a terrain the level also picks the
+    # column of terrain squares it starts on (hexa_mjx.mdp.terrain).
+    curriculum_levels: int = setting(0, "navigate: a curriculum of this many levels (0: none); each environment's "
+                                        "goals start near and ahead, and the bearing and distance ranges open as it "
+                                        "reaches goals (hexa_mjx.mdp.curriculum)")
+    waypoints: tuple = setting((), "navigate: walk a path instead, \"x,y x,y ...\" in metres from the start, world "
+                                   "frame, or a file holding that; the last waypoint stays the goal")
+    # Leg failure: a failed leg's three servos stop working. The policy is not told which leg failed.
+    disabled_legs: tuple = setting((), "legs whose servos fail in every episode, e.g. \"3\" or \"1 4\" "
+                                       "(numbers from 1)")
+    leg_failure: str = setting("none", "'random': each episode one random leg's servos fail (with "
+                                       "--leg_failure_rate); the policy is not told which", choices=["none", "random"])
+    leg_failure_rate: float = setting(0.5, "probability that an episode has a failed leg (--leg_failure random)")
+    leg_failure_weights: tuple = setting((), "relative chance of each leg (1, 2, ...) being the failed one "
+                                             "(--leg_failure random), e.g. 1 1 3 3 1 1 (default: uniform)",
+                                         nargs="+", type=float)
+    failure_mode: str = setting("limp", "a failed leg's servos give no torque (limp) or hold the start angles "
+                                        "(locked)", choices=["limp", "locked"])
+    push_speed: float = setting(0.0, "m/s, pushes: the torso's planar velocity is kicked by up to this every "
+                                     "--push_interval in a random direction (0: none)")
+    push_interval: float = setting(3.0, "s between pushes")
+    action_latency: float = setting(0.0, "control steps (0 to 1): each episode's commands reach the servos up to "
+                                         "this late; until then the previous command holds")
+    obs_noise: float = setting(0.0, "observation noise, a multiple of hexa_mjx.mdp.observations.NOISE_SCALES "
+                                    "(1: Playground's levels)")
+    terrain: str = setting("flat", "ground: the flat floor, or a heightfield (hexa_mjx.mdp.terrain: 4 cm bumps, "
+                                   "10-degree slopes, 3 cm steps, or patches of each)", choices=list(TERRAINS))
+    terrain_seed: int = setting(0, "seed of the generated terrain")
+    terrain_difficulty: float = setting(1.0, "the terrain's heights and slopes as a fraction of the full sizes "
+                                             "(0 to 1)")
 
 
 def make_config(task: str = "goal", reward: str = "", **overrides) -> EnvConfig:

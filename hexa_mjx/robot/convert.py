@@ -25,6 +25,7 @@ import mujoco
 import numpy as np
 
 from hexa_mjx.robot import constants as robot
+from hexa_mjx import atomic
 
 
 class ConversionError(ValueError):
@@ -358,13 +359,9 @@ def main(argv: list[str] | None = None) -> int:
     except ConversionError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    tmp = args.output.with_name(args.output.name + ".tmp")
     try:
-        args.output.parent.mkdir(parents=True, exist_ok=True)
-        tmp.write_text(xml)
-        tmp.replace(args.output)
+        atomic.write(args.output, xml)
     except OSError as e:
-        tmp.unlink(missing_ok=True)
         print(f"error: cannot write {args.output}: {e.strerror or e}", file=sys.stderr)
         return 2
     print(f"wrote {args.output}")

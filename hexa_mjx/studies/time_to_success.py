@@ -31,11 +31,11 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-# Configurations: train.py flags. "default" is train.py as it is; presets are named by train.py.
+# Configurations: train.py flags. "default" is train.py as it is; recipes are named by train.py.
 CONFIGS = {
     "default": [],
-    "paper": ["--preset", "paper"],
-    "fast": ["--preset", "fast"],
+    "paper": ["--recipe", "paper"],
+    "fast": ["--recipe", "fast"],
 }
 # Random starts, as the evaluations that decide success are meant to be (eval.py's perturbed starts).
 RANDOM_STARTS = ["--start_joint_noise", "0.1", "--start_yaw_noise", "0.3"]

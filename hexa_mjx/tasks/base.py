@@ -102,6 +102,11 @@ class Task:
         """The task's own figures for eval.py: (summary entries, per-episode entries)."""
         return {}, {}
 
+    @classmethod
+    def table_rows(cls, summary: dict) -> list[tuple[str, str]]:
+        """eval.py's table rows of the task's own figures."""
+        return []
+
     def evaluation_settings(self) -> dict:
         """The task's settings eval.py records with its figures."""
         return {}

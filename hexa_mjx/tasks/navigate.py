@@ -92,6 +92,12 @@ class NavigateTask(Task):
     def progress_figure(cls, row: dict) -> str:
         return f"goals {row['goals_per_episode']:.2f}"
 
+    @classmethod
+    def table_rows(cls, summary: dict) -> list[tuple[str, str]]:
+        from hexa_mjx.evaluation import nav_metrics
+
+        return nav_metrics.table_rows(summary)
+
     def evaluation_settings(self) -> dict:
         return {"goal_min_distance": self.config.goal_min_distance, "goal_max_distance": self.config.goal_max_distance,
                 "waypoints": [list(p) for p in self.config.waypoints]}

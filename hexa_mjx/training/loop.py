@@ -30,6 +30,7 @@ from hexa_mjx.training.optimizer_state import adam_template
 from hexa_mjx.training.progress import Logger, keep_rows_up_to
 from hexa_mjx.evaluation.run_evaluator import RunEvaluator
 from hexa_mjx.engines.wrappers import mean_last_return
+from hexa_mjx import atomic
 
 
 def network_factory(cfg: TrainConfig):
@@ -154,9 +155,7 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
         # One row per evaluation: rows past the checkpoint go, and the checkpoint's own evaluation is
         # logged again only if its row is missing (a run from before rows were written first).
         logged = keep_rows_up_to(run_dir, start_step)
-        tmp = run_dir / "config.json.tmp"
-        tmp.write_text(json.dumps(dataclasses.asdict(cfg), indent=2))
-        tmp.replace(run_dir / "config.json")
+        atomic.write(run_dir / "config.json", json.dumps(dataclasses.asdict(cfg), indent=2))
     start_step, restored, adam = (int(x) for x in distributed.share(
         jp.array([start_step, restore is not None, optimizer is not None])))
     if restored:

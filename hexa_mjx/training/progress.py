@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Callable
 
 from hexa_mjx.tasks import task_class
+from hexa_mjx import atomic
 
 if TYPE_CHECKING:
     from hexa_mjx.training.config import TrainConfig
@@ -46,9 +47,7 @@ def keep_rows_up_to(run_dir: Path, step: int) -> set[int]:
         if row.get("step", math.inf) <= step and row["step"] not in kept:
             kept.add(row["step"])
             lines.append(json.dumps(row))
-    tmp = path.with_suffix(".jsonl.tmp")
-    tmp.write_text("".join(line + "\n" for line in lines))
-    tmp.replace(path)
+    atomic.write(path, "".join(line + "\n" for line in lines))
     return kept
 
 
