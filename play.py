@@ -68,6 +68,7 @@ def onnx_file(policy: str, scratch: str) -> Path:
     return path
 
 
+# The command line top to bottom: load, check, then benchmark, view or play.
 def main(argv=None) -> int:
     args = parse_args(argv)
     if args.viewer:

@@ -7,7 +7,6 @@ import pytest
 
 import hexa_mjx
 from hexa_mjx.evaluation import nav_metrics
-from hexa_mjx.mdp import rewards
 from hexa_mjx.robot.kinematics import quat_mul, rotate, yaw
 from hexa_mjx.engines.mjx_env import DRAWS
 from hexa_mjx import cli

@@ -1,6 +1,7 @@
 """hexa_mjx.training.ppo runs brax's PPO: the same params as brax's `ppo.train` from the same seed, with the
 host called back between updates instead of from inside the program."""
 
+import dataclasses
 import jax
 import numpy as np
 import pytest
@@ -16,15 +17,15 @@ CFG = config.TrainConfig(num_envs=8, batch_size=8, num_minibatches=2, unroll_len
 @pytest.fixture(scope="module")
 def settings():
     env = config.make_env_for(CFG)
-    return env, dict(num_timesteps=192, num_evals=3, seed=5, **training.ppo_settings(CFG),
-                     max_devices_per_host=2, wrap_env_fn=training.wrap_env_fn(env))
+    return env, training.ppo_settings(CFG, num_timesteps=192, num_evals=3, seed=5, devices=2), dict(
+        network_factory=training.network_factory(CFG), wrap_env_fn=training.wrap_env_fn(env))
 
 
 @pytest.fixture(scope="module")
 def ours(settings):
-    env, kwargs = settings
+    env, ppo_settings, kwargs = settings
     intervals, updates = [], []
-    params = ppo.train(env, **kwargs, on_interval=lambda step, _, p, adam, env_state: intervals.append((step, p, adam)),
+    params = ppo.train(env, ppo_settings, **kwargs, on_interval=lambda step, _, p, adam, env_state: intervals.append((step, p, adam)),
                        on_update=lambda step, env_state: updates.append((step, env_state.obs.shape)))
     return params, intervals, updates
 
@@ -32,8 +33,9 @@ def ours(settings):
 def test_same_params_as_brax_ppo_train(settings, ours):
     from brax.training.agents.ppo import train as brax_ppo
 
-    env, kwargs = settings
-    _, reference, _ = brax_ppo.train(environment=env, run_evals=False, num_eval_envs=2, **kwargs)
+    env, ppo_settings, kwargs = settings
+    _, reference, _ = brax_ppo.train(environment=env, run_evals=False, num_eval_envs=2,
+                                     **dataclasses.asdict(ppo_settings), **kwargs)
     params, _, _ = ours
     assert jax.tree.structure(params) == jax.tree.structure(jax.tree.map(np.asarray, reference))
     jax.tree.map(np.testing.assert_array_equal, params, reference)
@@ -52,22 +54,22 @@ def test_host_sees_every_update_and_each_interval(ours):
 
 
 def test_bad_shapes_are_refused_before_anything_compiles(settings):
-    env, kwargs = settings
+    env, ppo_settings, kwargs = settings
     with pytest.raises(ValueError, match="num_envs 6 must divide"):
-        ppo.train(env, **{**kwargs, "num_envs": 6})
+        ppo.train(env, dataclasses.replace(ppo_settings, num_envs=6), **kwargs)
 
 
 def test_annealed_learning_rate_reaches_zero_at_the_end(settings, ours):
     """CleanRL's schedule: at the run's last step the learning rate is 0, so a run that starts
     there leaves the networks as they were, while the normalizer still learns."""
-    env, kwargs = settings
+    env, ppo_settings, kwargs = settings
     intervals = []
-    ppo.train(env, **kwargs, anneal_lr=(256, 256),
+    ppo.train(env, ppo_settings, **kwargs, anneal_lr=(256, 256),
               on_interval=lambda step, _, p, adam, env_state: intervals.append(p))
     (norm0, policy0, value0), (norm, policy, value) = intervals[0], intervals[-1]
     jax.tree.map(np.testing.assert_array_equal, (policy, value), (policy0, value0))
     assert not np.array_equal(norm.mean, norm0.mean)
     # From step 0 the schedule leaves most of the learning rate: the params move, but not as without it.
-    moved = jax.tree.leaves(ppo.train(env, **kwargs, anneal_lr=(0, 256))[1])
+    moved = jax.tree.leaves(ppo.train(env, ppo_settings, **kwargs, anneal_lr=(0, 256))[1])
     for other in (policy0, ours[0][1]):
         assert not all(np.array_equal(a, b) for a, b in zip(moved, jax.tree.leaves(other)))

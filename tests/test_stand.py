@@ -13,7 +13,6 @@ import pytest
 
 import hexa_mjx
 from hexa_mjx.deploy import export, player
-from hexa_mjx.engines.mjx_env import DRAWS
 from hexa_mjx.engines.native import NativeEnv
 from hexa_mjx.evaluation import evaluate
 from hexa_mjx.robot import constants as robot

@@ -17,6 +17,7 @@ import pytest
 from hexa_mjx.training import checkpoints, config, loop as training
 from hexa_mjx.evaluation import evaluate as evaluation, video
 from hexa_mjx.evaluation import table
+from hexa_mjx.tasks import TASKS
 
 from conftest import NOISE, TINY, run  # noqa: E402  (the shared tiny run: tests/conftest.py)
 
@@ -176,7 +177,8 @@ def test_eval_writes_video_and_metrics(trained, cache_env, tmp_path):
 
 def test_episode_table_phases_average_over_episodes_that_have_them():
     """Two 4-step episodes: the first reaches the goal at its second step, the second never does."""
-    env = SimpleNamespace(config=SimpleNamespace(success_radius=0.5, max_contact_points=3), dt=0.1)
+    env_config = SimpleNamespace(success_radius=0.5, max_contact_points=3)
+    env = SimpleNamespace(config=env_config, dt=0.1, task=TASKS["goal"](env_config, None))
     T, N = 4, 2
     contacts = np.zeros((T, N, len(evaluation.CONTACT_GROUPS)))
     contacts[:, 0, 3] = [1, 2, 2, 2]  # feet of episode 0: 1 before the goal, 2 after
@@ -184,6 +186,7 @@ def test_episode_table_phases_average_over_episodes_that_have_them():
     traj = {"alive": np.ones((T, N)), "distance": np.array([[1.0, 1.0], [0.4, 0.9], [0.3, 0.8], [0.6, 0.7]]),
             "qpos": np.zeros((T, N, 7)), "goal_bonus": np.zeros((T, N)), "reward": np.ones((T, N)),
             "fell": np.zeros((T, N)), "nonfinite": np.zeros((T, N)), "contacts": contacts,
+            "success": np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 0.0], [1.0, 0.0]]),  # within 0.5 m, so far
             "reward/body_contact": -contacts[..., 2]}
     summary = evaluation.episode_table(env, np.zeros((N, 7)), traj)["summary"]
     assert summary["success_rate"] == 0.5 and summary["steps_to_goal_mean"] == 1.0

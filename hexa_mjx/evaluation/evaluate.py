@@ -15,9 +15,8 @@ import numpy as np
 from brax.envs.wrappers import training as brax_training
 
 from hexa_mjx.training import checkpoints, config, loop as training
-from hexa_mjx.evaluation import gait, nav_metrics, plots
+from hexa_mjx.evaluation import gait, plots
 from hexa_mjx.mdp import randomization
-from hexa_mjx.robot import constants as robot
 from hexa_mjx.engines import wrappers
 from hexa_mjx.robot.model import servo_power
 from hexa_mjx.evaluation.video import render_video
@@ -82,7 +81,8 @@ def rollout(env, policy, num_episodes: int, seed: int = 0, ranges=None):
                    "power": jax.vmap(lambda d: servo_power(d.actuator_force, d.qvel, env.robot.actuator_dof))(
                        nxt.pipeline_state),
                    **{k: v for k, v in nxt.metrics.items()
-                      if k.startswith("reward/") or k in ("distance", "fell", "goal_bonus", "nonfinite", "goals_reached")}}
+                      if k.startswith("reward/") or k in ("distance", "success", "fell", "goal_bonus", "nonfinite",
+                                                          "goals_reached")}}
             return (nxt, alive * (1.0 - nxt.done)), out
 
         start_qpos = state.pipeline_state.qpos
@@ -103,6 +103,21 @@ def rollout(env, policy, num_episodes: int, seed: int = 0, ranges=None):
     return np.asarray(start).reshape(num_episodes, -1), jax.tree.map(merge, traj)
 
 
+def contact_figures(contacts, alive, phases: dict, cap: int) -> dict:
+    """Per episode: mean floor contact points per step by link group in each phase (before and after
+    first reaching the goal), the most points at once, and the steps at the physics' contact cap."""
+    out = {}
+    for phase, mask in phases.items():
+        steps = np.maximum(mask.sum(0), 1)[:, None]
+        out[f"contacts_{phase}"] = (contacts * mask[..., None]).sum(0) / steps
+    points = contacts.sum(-1) * alive  # floor contact points at once, every group
+    out["contact_points_max"] = points.max(0)
+    # Steps at which the physics had as many contact points as it keeps (more may have been dropped).
+    out["steps_at_contact_cap"] = (points >= cap).sum(0) if cap else np.zeros(alive.shape[1], int)
+    return out
+
+
+# Long by design: one entry per figure of eval.py's table, each a line or two.
 def episode_table(env, start_qpos, traj) -> dict:
     """Per-episode figures and their summary (means over episodes; median final distance too)."""
     alive = traj["alive"]  # 1 for steps taken inside the episode, terminal step included
@@ -112,7 +127,7 @@ def episode_table(env, start_qpos, traj) -> dict:
     final_xy = traj["qpos"][last, idx, :2]
     dist = np.where(alive > 0, traj["distance"], np.inf)
     per_episode = {
-        "success": dist.min(0) < env.config.success_radius,
+        "success": (traj["success"] * alive).max(0) > 0,  # the task's own criterion, at any step
         "final_distance": traj["distance"][last, idx],
         "min_distance": dist.min(0),
         "goal_bonus": (traj["goal_bonus"] * alive).sum(0),
@@ -130,15 +145,7 @@ def episode_table(env, start_qpos, traj) -> dict:
         per_episode["body_contact_before_goal"] = (traj["reward/body_contact"] * walking).sum(0)
     phases = {"before_goal": walking, "after_goal": alive - walking}
     if "contacts" in traj:
-        # Mean floor contact points per step, by link group, before and after first reaching the goal.
-        for phase, mask in phases.items():
-            steps = np.maximum(mask.sum(0), 1)[:, None]
-            per_episode[f"contacts_{phase}"] = (traj["contacts"] * mask[..., None]).sum(0) / steps
-        points = traj["contacts"].sum(-1) * alive  # floor contact points at once, every group
-        per_episode["contact_points_max"] = points.max(0)
-        cap = env.config.max_contact_points
-        # Steps at which the physics had as many contact points as it keeps (more may have been dropped).
-        per_episode["steps_at_contact_cap"] = (points >= cap).sum(0) if cap else np.zeros_like(length)
+        per_episode.update(contact_figures(traj["contacts"], alive, phases, env.config.max_contact_points))
 
     # Per-phase figures average over the episodes that have that phase: an episode that never
     # reaches the goal has no steps to it and no steps after it (None when no episode has any).

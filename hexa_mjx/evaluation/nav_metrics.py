@@ -7,8 +7,6 @@ on hand-made trajectories. Bearings are measured from the torso's heading when t
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
 from hexa_mjx.robot import constants as robot

@@ -177,6 +177,8 @@ def main(argv=None) -> None:
 
 def plot_tracks(env, start, traj, out: Path, count: int = 8) -> Path:
     """Top view of the first episodes' torso tracks with their goals (or the waypoint path)."""
+    import numpy as np
+
     tracks, goals = [], []
     for i in range(min(count, start.shape[0])):
         n = int(traj["alive"][:, i].sum())

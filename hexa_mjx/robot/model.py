@@ -46,6 +46,7 @@ def action_to_ctrl(action, ctrl_lo, ctrl_hi):
 class RobotModel:
     """The compiled model of an `EnvConfig`, the geoms the rewards read, and the settled start."""
 
+    # Long by design: everything both engines read from the compiled model, read once, here.
     def __init__(self, config: EnvConfig):
         self.terrain = (terrains.generate(config.terrain, config.terrain_seed, config.terrain_difficulty,
                                           config.curriculum_levels) if config.terrain != "flat" else None)

@@ -22,19 +22,18 @@ import statistics
 import time
 
 import jax
-import jax.numpy as jp
 import mujoco
 import numpy as np
 from mujoco import rollout
 
 import hexa_mjx
-from hexa_mjx.training import config, jax_setup
+from hexa_mjx.training import jax_setup
 from hexa_mjx.mdp import randomization, terrain
 from hexa_mjx.robot import constants as robot
 from hexa_mjx.engines import wrappers
 
 
-def _rollout_fn(batched_step, action_size: int, steps: int):
+def rollout_fn(batched_step, action_size: int, steps: int):
     """A jitted rollout of `steps` control steps of a batched step function under uniform random actions."""
     def run(state, rng):
         def body(carry, _):
@@ -45,6 +44,18 @@ def _rollout_fn(batched_step, action_size: int, steps: int):
         (state, _), _ = jax.lax.scan(body, (state, rng), None, length=steps)
         return state
     return jax.jit(run)
+
+
+def timed(fn, args, repeats):
+    """(compile s, median run s, output) of a jitted function."""
+    t0 = time.perf_counter()
+    out = jax.block_until_ready(fn(*args))
+    compile_s, times = time.perf_counter() - t0, []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        out = jax.block_until_ready(fn(*args))
+        times.append(time.perf_counter() - t0)
+    return compile_s, statistics.median(times), out
 
 
 def mjx_speed(env, batch: int, steps: int, repeats: int) -> dict:
@@ -72,7 +83,7 @@ def compare_speed(envs: dict, batch: int, steps: int, repeats: int) -> dict:
     for name, env in envs.items():
         step, reset = ((jax.vmap(env.step), jax.vmap(env.reset)) if hasattr(env, "step")
                        else (lambda b: (b.step, b.reset))(env(batch)))
-        run = _rollout_fn(step, env.action_size, steps)
+        run = rollout_fn(step, env.action_size, steps)
         state = jax.jit(reset)(jax.random.split(jax.random.PRNGKey(0), batch))
         t0 = time.perf_counter()
         runs[name] = (run, jax.block_until_ready(run(state, jax.random.PRNGKey(1))))
@@ -88,10 +99,10 @@ def compare_speed(envs: dict, batch: int, steps: int, repeats: int) -> dict:
 def pmap_speed(env, batch: int, steps: int, repeats: int, devices: int) -> float:
     """Median env steps/s with the batch split over `devices` devices (pmap), as PPO splits it."""
     reset = jax.pmap(jax.vmap(env.reset))
-    run = jax.pmap(_rollout_fn(jax.vmap(env.step), env.action_size, steps))
+    run = jax.pmap(rollout_fn(jax.vmap(env.step), env.action_size, steps))
     state = reset(jax.random.split(jax.random.PRNGKey(0), batch).reshape(devices, batch // devices, -1))
     keys = jax.random.split(jax.random.PRNGKey(1), devices)
-    return batch * steps / _timed(run, (state, keys), repeats)[1]
+    return batch * steps / timed(run, (state, keys), repeats)[1]
 
 
 def mujoco_c_speed(model: mujoco.MjModel, steps: int, repeats: int, seed: int = 0) -> float:
@@ -144,141 +155,10 @@ def solver_error(env, steps: int) -> tuple[float, float]:
     return float(np.abs(fast[:3] - ref[:3]).max()), float(np.abs(fast[7:] - ref[7:]).max())
 
 
-def train_speed(num_envs: int = 256, updates: int = 4, devices: int = 1, **overrides) -> dict:
-    """End-to-end PPO env steps/s (train.py's settings, no evaluations) and compile time on `devices`.
-    Three training epochs of `updates` updates: the first compiles, the last is timed."""
-    from hexa_mjx.training import ppo, loop as training
-
-    cfg = config.TrainConfig(num_envs=num_envs, **overrides)
-    env = config.make_env_for(cfg)
-    marks = [(0, time.perf_counter())]
-    ppo.train(env, num_timesteps=3 * updates * cfg.steps_per_update, num_evals=4, seed=cfg.seed,
-              **training.ppo_settings(cfg), max_devices_per_host=devices, wrap_env_fn=training.wrap_env_fn(env),
-              on_interval=lambda step, *_: marks.append((step, time.perf_counter())) if step else None)
-    (s1, t1), (s2, t2) = marks[-2:]
-    epoch_s = t2 - t1
-    return {"train_steps_per_s": (s2 - s1) / epoch_s, "compile_s": (marks[-3][1] - marks[0][1]) - epoch_s,
-            "update_s": epoch_s / updates}
-
-
-def _timed(fn, args, repeats):
-    """(compile s, median run s, output) of a jitted function."""
-    t0 = time.perf_counter()
-    out = jax.block_until_ready(fn(*args))
-    compile_s, times = time.perf_counter() - t0, []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = jax.block_until_ready(fn(*args))
-        times.append(time.perf_counter() - t0)
-    return compile_s, statistics.median(times), out
-
-
-def _without_contacts(env):
-    """A copy of `env` whose physics skips collision detection and contact forces."""
-    import copy
-
-    model = copy.copy(env.mj_model)
-    model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
-    return env.with_physics(model)
-
-
-def training_profile(num_envs: int = 256, repeats: int = 3, **overrides) -> dict:
-    """Seconds per PPO update on one device, by part: physics without contacts, contacts, policy
-    inference while acting, and the SGD epochs, each timed alone with train.py's settings
-    (`overrides` set other TrainConfig fields)."""
-    import functools
-
-    import optax
-    from brax import envs
-    from brax.training import acting
-    from brax.training.agents.ppo import losses as ppo_losses
-    from brax.training.agents.ppo import networks as ppo_networks
-
-    from hexa_mjx.training import loop as training
-
-    cfg = config.TrainConfig(num_envs=num_envs, **overrides)
-    env = config.make_env_for(cfg)
-    steps = cfg.steps_per_update // num_envs  # control steps per env per update
-    keys = jax.random.split(jax.random.PRNGKey(0), num_envs)
-
-    out = {}
-    for name, e in (("env", env), ("env_without_contacts", _without_contacts(env))):
-        wrapped = envs.training.wrap(e, episode_length=cfg.episode_length)  # batched, as PPO steps it
-        run = _rollout_fn(wrapped.step, env.action_size, steps)
-        out[name] = _timed(run, (jax.jit(wrapped.reset)(keys), jax.random.PRNGKey(1)), repeats)[1]
-
-    # Acting as brax's PPO does it: the policy samples actions, trajectories are regrouped for SGD.
-    wrapped = envs.training.wrap(env, episode_length=cfg.episode_length)
-    nets = training.make_networks(cfg, env)
-    normalizer, policy_params, value_params = training.init_params(cfg, env)
-    params = ppo_losses.PPONetworkParams(policy=policy_params, value=value_params)
-    make_policy = ppo_networks.make_inference_fn(nets)
-
-    def act(state, key, params):
-        policy = make_policy((normalizer, params.policy, params.value))
-
-        def segment(carry, _):
-            state, key = carry
-            key, sub = jax.random.split(key)
-            state, data = acting.generate_unroll(wrapped, state, policy, sub, cfg.unroll_length,
-                                                 extra_fields=("truncation",))
-            return (state, key), data
-        _, data = jax.lax.scan(segment, (state, key), (), length=steps // cfg.unroll_length)
-        data = jax.tree.map(lambda x: jp.swapaxes(x, 1, 2), data)
-        return jax.tree.map(lambda x: jp.reshape(x, (-1,) + x.shape[2:]), data)
-    _, out["acting"], data = _timed(jax.jit(act), (jax.jit(wrapped.reset)(keys), jax.random.PRNGKey(1), params),
-                                    repeats)
-
-    # The SGD epochs of one update, as brax's PPO runs them (same loss, clipping and Adam).
-    loss_fn = functools.partial(ppo_losses.compute_ppo_loss, ppo_network=nets, entropy_cost=cfg.ent_coef,
-                                discounting=cfg.discount, reward_scaling=cfg.reward_scaling,
-                                gae_lambda=cfg.gae_lambda, clipping_epsilon=cfg.clip, normalize_advantage=True,
-                                vf_coefficient=cfg.vf_coef)
-    grad_fn = jax.value_and_grad(loss_fn, has_aux=True)
-    optimizer = optax.chain(optax.clip_by_global_norm(cfg.max_grad_norm), optax.adam(cfg.lr))
-
-    def sgd(params, opt_state, key):
-        def minibatch(carry, batch):
-            opt_state, params, key = carry
-            key, sub = jax.random.split(key)
-            _, grads = grad_fn(params, normalizer, batch, sub)
-            updates, opt_state = optimizer.update(grads, opt_state)
-            return (opt_state, optax.apply_updates(params, updates), key), None
-
-        def epoch(carry, _):
-            opt_state, params, key = carry
-            key, perm, sub = jax.random.split(key, 3)
-            batches = jax.tree.map(lambda x: jp.reshape(jax.random.permutation(perm, x),
-                                                        (cfg.num_minibatches, -1) + x.shape[1:]), data)
-            (opt_state, params, _), _ = jax.lax.scan(minibatch, (opt_state, params, sub), batches)
-            return (opt_state, params, key), None
-        return jax.lax.scan(epoch, (opt_state, params, key), (), length=cfg.update_epochs)[0][1]
-    out["sgd"] = _timed(jax.jit(sgd), (params, optimizer.init(params), jax.random.PRNGKey(2)), repeats)[1]
-    out["sgd_flop"] = sgd_flop(cfg, env)
-    out["matmul_flop_per_s"] = matmul_speed(cfg.batch_size * cfg.unroll_length, cfg.hidden[-1], repeats)
-    return out
-
-
-def sgd_flop(cfg, env) -> float:
-    """Floating-point operations of one update's SGD, counting the dense layers only: every epoch
-    runs each sample forward and backward (about 3x the forward cost) through the policy and
-    value networks; a multiply-add is 2 FLOP."""
-    def macs(sizes):
-        return sum(a * b for a, b in zip(sizes[:-1], sizes[1:]))
-    obs = env.observation_size
-    per_sample = macs([obs, *cfg.hidden, 2 * env.action_size]) + macs([obs, *cfg.hidden, 1])
-    return 2 * 3 * per_sample * cfg.steps_per_update * cfg.update_epochs
-
-
-def matmul_speed(rows: int, width: int, repeats: int, layers: int = 200) -> float:
-    """FLOP/s of a chain of (rows x width) @ (width x width) products with tanh, the shape of one
-    minibatch through a hidden layer: what the SGD could reach if it were all matmul."""
-    x, w = jp.ones((rows, width)), jp.full((width, width), 1.0 / width)
-    chain = jax.jit(lambda x, w: jax.lax.fori_loop(0, layers, lambda _, h: jp.tanh(h @ w), x))
-    return 2 * rows * width * width * layers / _timed(chain, (x, w), repeats)[1]
-
-
+# The command line top to bottom: one section per measurement it can print.
 def main(argv=None) -> None:
+    from hexa_mjx.studies import training_speed  # it times with this module's helpers
+
     parser = argparse.ArgumentParser(prog="python -m hexa_mjx.studies.benchmark", description=__doc__.split("\n\n")[0])
     parser.add_argument("--batches", type=int, nargs="+", default=[64, 256, 1024], help="numbers of environments")
     parser.add_argument("--steps", type=int, default=100, help="control steps per timed rollout")
@@ -350,7 +230,7 @@ def main(argv=None) -> None:
             print(f"  {kind:<7} ({envs[kind].contact_slots} contact slots) {rate:8.0f}  {rate / base:5.2f}x  "
                   f"compile {compile_s:.0f} s")
     if args.profile:
-        p = training_profile(args.batches[-1], args.repeats, **cap)
+        p = training_speed.training_profile(args.batches[-1], args.repeats, **cap)
         parts = {"physics without contacts": p["env_without_contacts"], "contacts": p["env"] - p["env_without_contacts"],
                  "policy inference": p["acting"] - p["env"], "SGD (epochs x minibatches)": p["sgd"]}
         total = p["acting"] + p["sgd"]
@@ -367,7 +247,7 @@ def main(argv=None) -> None:
         if cores > 1:
             env_rates[cores] = pmap_speed(env, args.batches[-1], args.steps, args.repeats, cores)
         for devices, env_rate in env_rates.items():
-            r = train_speed(args.batches[-1], devices=devices, **cap)
+            r = training_speed.train_speed(args.batches[-1], devices=devices, **cap)
             print(f"PPO training at {args.batches[-1]} envs on {devices} device(s): {r['train_steps_per_s']:.0f} "
                   f"env steps/s after {r['compile_s']:.0f} s of compiling; environment alone {env_rate:.0f} env "
                   f"steps/s: the learner adds {env_rate / r['train_steps_per_s'] - 1:.0%} to the environment time")

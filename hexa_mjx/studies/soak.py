@@ -125,6 +125,7 @@ def finished(run_dir: Path, args: list[str]) -> bool:
     return bool(found) and found[-1][0] >= config.parse_args(args).num_timesteps
 
 
+# Long by design: one scenario (train, kill at random, resume, compare) read top to bottom.
 def soak_kills(kills: int, train_args: list[str], out: Path, seed: int) -> dict:
     """The uninterrupted run, then the same run killed `kills` times and resumed; see the module doc."""
     import jax

@@ -15,11 +15,10 @@ import dataclasses
 import json
 from pathlib import Path
 
-from hexa_mjx import cli
 from hexa_mjx.engines import make_env
 from hexa_mjx.mdp import rewards
 from hexa_mjx.mdp.config import EnvConfig
-from hexa_mjx.tasks import DEFAULT_TASK, TASKS, default_reward, reward_variants, task_class
+from hexa_mjx.tasks import DEFAULT_TASK, TASKS, default_reward, reward_variants
 from hexa_mjx.training import recipes
 
 ENV, PPO, RUN, SCALE_OUT = "task and environment", "PPO", "run", "scale-out"

@@ -73,16 +73,17 @@ def make_inference(cfg: TrainConfig, env, params, deterministic=True):
     return lambda obs, key: policy(obs, key)[0]
 
 
-def ppo_settings(cfg: TrainConfig) -> dict:
-    """The algorithm and rollout shape of `cfg` as keyword arguments of `hexa_mjx.training.ppo.train` (and of
-    brax's `ppo.train`, which takes the same)."""
-    return dict(num_envs=cfg.num_envs, episode_length=cfg.episode_length, learning_rate=cfg.lr,
-                entropy_cost=cfg.ent_coef, discounting=cfg.discount, unroll_length=cfg.unroll_length,
-                batch_size=cfg.batch_size, num_minibatches=cfg.num_minibatches,
-                num_updates_per_batch=cfg.update_epochs, normalize_observations=True,
-                reward_scaling=cfg.reward_scaling, clipping_epsilon=cfg.clip, gae_lambda=cfg.gae_lambda,
-                max_grad_norm=cfg.max_grad_norm, vf_loss_coefficient=cfg.vf_coef,
-                network_factory=network_factory(cfg))
+def ppo_settings(cfg: TrainConfig, num_timesteps: int, num_evals: int, seed: int,
+                 devices: int | None = None) -> ppo.PPOSettings:
+    """The algorithm and rollout shape of `cfg` for `num_timesteps` steps in `num_evals - 1`
+    intervals, as `hexa_mjx.training.ppo.train` (and brax's `ppo.train`) take them."""
+    return ppo.PPOSettings(num_timesteps=num_timesteps, num_evals=num_evals, seed=seed, num_envs=cfg.num_envs,
+                           episode_length=cfg.episode_length, unroll_length=cfg.unroll_length,
+                           batch_size=cfg.batch_size, num_minibatches=cfg.num_minibatches,
+                           num_updates_per_batch=cfg.update_epochs, learning_rate=cfg.lr, entropy_cost=cfg.ent_coef,
+                           discounting=cfg.discount, reward_scaling=cfg.reward_scaling, clipping_epsilon=cfg.clip,
+                           gae_lambda=cfg.gae_lambda, max_grad_norm=cfg.max_grad_norm,
+                           vf_loss_coefficient=cfg.vf_coef, max_devices_per_host=devices)
 
 
 def evals_for(cfg: TrainConfig, remaining: int) -> int:
@@ -134,6 +135,8 @@ def resume_point(cfg: TrainConfig, run_dir: Path, template, optimizer_template) 
     return start_step, restore, optimizer
 
 
+# Long by design: the run's steps top to bottom (environment, resume point, logger, PPO, the
+# last evaluation), each a call to a named helper, as a CleanRL script reads.
 def train(cfg: TrainConfig, on_eval=None) -> dict:
     """Run (or resume) PPO for `cfg`; returns the last evaluation row. `on_eval(row)` is called with
     each evaluation's metrics.jsonl row (a sweep reports them to its scheduler)."""
@@ -209,8 +212,8 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
           f"{cfg.steps_per_update:,} steps per update -> {run_dir}", flush=True)
     if logger:
         logger.compiling(evaluation_first=evaluate_start)
-    ppo.train(env, num_timesteps=remaining, num_evals=evals_for(cfg, remaining), seed=cfg.seed + start_step,
-              **ppo_settings(cfg), max_devices_per_host=devices,
+    ppo.train(env, ppo_settings(cfg, remaining, evals_for(cfg, remaining), cfg.seed + start_step, devices),
+              network_factory(cfg),
               # Returns are kept whether or not this process prints them: every process runs one program.
               wrap_env_fn=wrap_env_fn(env, cfg.randomize, track_returns=True, failure_schedule=schedule),
               randomization_fn=randomization_fn, restore_params=restore, restore_adam=optimizer,

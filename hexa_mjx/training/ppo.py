@@ -12,6 +12,7 @@ the cache.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from typing import Callable
 
@@ -52,106 +53,93 @@ def with_adam(optimizer_state, adam_state):
     return (optimizer_state[0], restored)
 
 
-def train(environment, *, num_timesteps: int, num_evals: int, seed: int, num_envs: int, episode_length: int,
-          unroll_length: int, batch_size: int, num_minibatches: int, num_updates_per_batch: int,
-          learning_rate: float, entropy_cost: float, discounting: float, reward_scaling: float,
-          clipping_epsilon: float, gae_lambda: float, max_grad_norm: float, vf_loss_coefficient: float,
-          network_factory, normalize_observations: bool = True, max_devices_per_host: int | None = None,
-          wrap_env_fn=None, randomization_fn=None, restore_params=None, restore_adam=None,
-          anneal_lr: tuple[int, int] | None = None, on_interval: Callable | None = None,
-          on_update: Callable | None = None):
-    """PPO as brax's `ppo.train` runs it (same arguments), for `num_timesteps` env steps in
-    `num_evals - 1` intervals. On process 0, `on_interval(step, make_policy, params, adam_state,
-    env_state)` is called before training and after each interval (params and Adam's state as host
-    copies; the training environments' state laid out (devices, environments per device, ...));
+@dataclasses.dataclass(frozen=True)
+class PPOSettings:
+    """PPO's hyperparameters and run shape, named as brax's `ppo.train` names its arguments (so
+    `dataclasses.asdict(settings)` is also the keywords of a brax call; tests/test_ppo.py)."""
+
+    num_timesteps: int  # env steps in all
+    num_evals: int  # brax's count: intervals + 1 (the evaluation before training is one)
+    seed: int
+    num_envs: int
+    episode_length: int  # control steps
+    unroll_length: int  # steps per trajectory segment
+    batch_size: int  # trajectory segments per minibatch
+    num_minibatches: int
+    num_updates_per_batch: int  # epochs over each rollout
+    learning_rate: float
+    entropy_cost: float
+    discounting: float
+    reward_scaling: float
+    clipping_epsilon: float
+    gae_lambda: float
+    max_grad_norm: float
+    vf_loss_coefficient: float
+    normalize_observations: bool = True
+    max_devices_per_host: int | None = None
+
+
+# One function, as brax's ppo.train is: the update's closures share the run's networks, optimizer
+# and keys, and it reads top to bottom as the run goes.
+def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=None, randomization_fn=None,
+          restore_params=None, restore_adam=None, anneal_lr: tuple[int, int] | None = None,
+          on_interval: Callable | None = None, on_update: Callable | None = None):
+    """PPO as brax's `ppo.train` runs it (the same `settings` and `network_factory`), for
+    `settings.num_timesteps` env steps in `settings.num_evals - 1` intervals. On process 0,
+    `on_interval(step, make_policy, params, adam_state, env_state)` is called before training and
+    after each interval (params and Adam's state as host copies; the training environments' state
+    laid out (devices, environments per device, ...));
     `on_update(step, env_state)` after every update, once it has run. `restore_params` and
     `restore_adam` (host arrays, `optimizer_state.adam_template`'s structure) continue a run.
     `anneal_lr=(done, total)`: CleanRL's schedule, the learning rate falling linearly from
-    `learning_rate` at env step 0 to 0 at `total`, for a run that has `done` steps behind it.
+    `settings.learning_rate` at env step 0 to 0 at `total`, for a run that has `done` steps behind it.
     Returns the final (normalizer, policy, value) params."""
-    if not normalize_observations:
+    if not settings.normalize_observations:
         raise ValueError("hexa_mjx's PPO always normalizes observations")
     process_id, process_count = jax.process_index(), jax.process_count()
-    devices = jax.local_devices()[:max_devices_per_host or None]
+    devices = jax.local_devices()[:settings.max_devices_per_host or None]
     device_count = len(devices) * process_count
-    if num_envs % device_count or (batch_size * num_minibatches) % num_envs:
-        raise ValueError(f"num_envs {num_envs} must divide over {device_count} devices and divide "
-                         f"batch_size x num_minibatches ({batch_size * num_minibatches})")
-    steps_per_update = batch_size * unroll_length * num_minibatches
-    intervals = max(num_evals - 1, 1)
-    updates_per_interval = int(np.ceil(num_timesteps / (intervals * steps_per_update)))
+    if settings.num_envs % device_count or (settings.batch_size * settings.num_minibatches) % settings.num_envs:
+        raise ValueError(f"num_envs {settings.num_envs} must divide over {device_count} devices and divide "
+                         f"batch_size x num_minibatches ({settings.batch_size * settings.num_minibatches})")
+    steps_per_update = settings.batch_size * settings.unroll_length * settings.num_minibatches
+    intervals = max(settings.num_evals - 1, 1)
+    updates_per_interval = int(np.ceil(settings.num_timesteps / (intervals * steps_per_update)))
 
     # brax's keys, drawn in brax's order, so that a run agrees with ppo.train from the same seed.
-    global_key, local_key = jax.random.split(jax.random.PRNGKey(seed))
+    global_key, local_key = jax.random.split(jax.random.PRNGKey(settings.seed))
     local_key = jax.random.fold_in(local_key, process_id)
     local_key, key_env, _ = jax.random.split(local_key, 3)
     key_policy, key_value = jax.random.split(global_key)
 
     randomize = None
     if randomization_fn is not None:  # one model per environment, the same draw on every device
-        randomize = functools.partial(randomization_fn, rng=jax.random.split(key_env, num_envs // device_count))
-    env = (wrap_env_fn or envs.training.wrap)(environment, episode_length=episode_length, action_repeat=1,
+        randomize = functools.partial(randomization_fn,
+                                      rng=jax.random.split(key_env, settings.num_envs // device_count))
+    env = (wrap_env_fn or envs.training.wrap)(environment, episode_length=settings.episode_length, action_repeat=1,
                                              randomization_fn=randomize)
-    key_envs = jax.random.split(key_env, num_envs // process_count)
+    key_envs = jax.random.split(key_env, settings.num_envs // process_count)
     env_state = jax.pmap(env.reset, axis_name=AXIS)(key_envs.reshape((len(devices), -1) + key_envs.shape[1:]))
 
     obs_shape = env_state.obs.shape[2:]
     network = network_factory(obs_shape, env.action_size, preprocess_observations_fn=running_statistics.normalize)
     make_policy = ppo_networks.make_inference_fn(network)
-    optimizer = optax.chain(optax.clip_by_global_norm(max_grad_norm), optax.adam(learning_rate))
-    loss_and_grad = gradients.loss_and_pgrad(
-        functools.partial(ppo_losses.compute_ppo_loss, ppo_network=network, entropy_cost=entropy_cost,
-                          discounting=discounting, reward_scaling=reward_scaling, gae_lambda=gae_lambda,
-                          clipping_epsilon=clipping_epsilon, normalize_advantage=True,
-                          vf_coefficient=vf_loss_coefficient),
-        pmap_axis_name=AXIS, has_aux=True)
-
-    def minibatch_step(carry, data, normalizer, lr_scale):
-        opt_state, params, key = carry
-        key, key_loss = jax.random.split(key)
-        _, grads = loss_and_grad(params, normalizer, data, key_loss)
-        step, opt_state = optimizer.update(grads, opt_state)
-        if anneal_lr is not None:  # Adam's step is proportional to its learning rate
-            step = jax.tree.map(lambda x: x * lr_scale, step)
-        return (opt_state, optax.apply_updates(params, step), key), None
-
-    def sgd_epoch(carry, _, data, normalizer, lr_scale):
-        opt_state, params, key = carry
-        key, key_perm, key_grad = jax.random.split(key, 3)
-        shuffled = jax.tree.map(lambda x: jax.random.permutation(key_perm, x).reshape(
-            (num_minibatches, -1) + x.shape[1:]), data)
-        (opt_state, params, _), _ = jax.lax.scan(
-            functools.partial(minibatch_step, normalizer=normalizer, lr_scale=lr_scale),
-            (opt_state, params, key_grad), shuffled, length=num_minibatches)
-        return (opt_state, params, key), None
+    optimizer = make_optimizer(settings)
+    rollout = rollout_fn(env, make_policy, settings)
+    sgd = sgd_fn(network, optimizer, settings, scaled_lr=anneal_lr is not None)
 
     def update(state: TrainingState, env_state, key):
         """One PPO update: every environment rolls out, then epochs of minibatch SGD on the batch."""
         key_sgd, key_unroll, next_key = jax.random.split(key, 3)
-        policy = make_policy((state.normalizer_params, state.params.policy, state.params.value))
-
-        def unroll(carry, _):
-            env_state, key = carry
-            key, next_key = jax.random.split(key)
-            env_state, data = acting.generate_unroll(env, env_state, policy, key, unroll_length,
-                                                     extra_fields=UNROLL_FIELDS)
-            return (env_state, next_key), data
-
-        (env_state, _), data = jax.lax.scan(unroll, (env_state, key_unroll), (),
-                                            length=batch_size * num_minibatches // num_envs)
-        # (unrolls x steps x environments) -> (unrolls * environments, steps)
-        data = jax.tree.map(lambda x: jp.swapaxes(x, 1, 2), data)
-        data = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), data)
+        env_state, data = rollout((state.normalizer_params, state.params.policy, state.params.value), env_state,
+                                  key_unroll)
         normalizer = running_statistics.update(state.normalizer_params, data.observation, pmap_axis_name=AXIS)
         lr_scale = 1.0
         if anneal_lr is not None:  # the share of the run still ahead, as CleanRL's `frac`
             done, total = anneal_lr
             steps = state.env_steps.hi.astype(jp.float32) * 2.0 ** 32 + state.env_steps.lo.astype(jp.float32)
             lr_scale = jp.clip(1.0 - (done + steps) / total, 0.0, 1.0)
-        (opt_state, params, _), _ = jax.lax.scan(functools.partial(sgd_epoch, data=data, normalizer=normalizer,
-                                                                   lr_scale=lr_scale),
-                                                 (state.optimizer_state, state.params, key_sgd), (),
-                                                 length=num_updates_per_batch)
+        opt_state, params = sgd(state.optimizer_state, state.params, normalizer, data, key_sgd, lr_scale)
         return TrainingState(optimizer_state=opt_state, params=params, normalizer_params=normalizer,
                              env_steps=state.env_steps + steps_per_update), env_state, next_key
 
@@ -190,3 +178,73 @@ def train(environment, *, num_timesteps: int, num_evals: int, seed: int, num_env
     pmap.assert_is_replicated(state)
     pmap.synchronize_hosts()
     return jax.tree.map(np.asarray, unpmap((state.normalizer_params, state.params.policy, state.params.value)))
+
+
+def make_optimizer(settings: PPOSettings):
+    """brax's PPO optimizer: gradients clipped by global norm, then Adam."""
+    return optax.chain(optax.clip_by_global_norm(settings.max_grad_norm), optax.adam(settings.learning_rate))
+
+
+def rollout_fn(env, make_policy, settings: PPOSettings):
+    """One update's acting, as brax's PPO runs it: `rollout(params, env_state, key) -> (env_state,
+    data)`, every environment stepping `batch_size x num_minibatches / num_envs` segments of
+    `unroll_length` steps with the policy of `params` (normalizer, policy, value); `data` holds one
+    segment per row."""
+
+    def rollout(params, env_state, key):
+        policy = make_policy(params)
+
+        def unroll(carry, _):
+            env_state, key = carry
+            key, next_key = jax.random.split(key)
+            env_state, data = acting.generate_unroll(env, env_state, policy, key, settings.unroll_length,
+                                                     extra_fields=UNROLL_FIELDS)
+            return (env_state, next_key), data
+
+        segments = settings.batch_size * settings.num_minibatches // settings.num_envs
+        (env_state, _), data = jax.lax.scan(unroll, (env_state, key), (), length=segments)
+        # (unrolls x steps x environments) -> (unrolls * environments, steps)
+        data = jax.tree.map(lambda x: jp.swapaxes(x, 1, 2), data)
+        return env_state, jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), data)
+
+    return rollout
+
+
+def sgd_fn(network, optimizer, settings: PPOSettings, scaled_lr: bool = False):
+    """One update's learning, as brax's PPO runs it: `sgd(opt_state, params, normalizer, data, key,
+    lr_scale) -> (opt_state, params)`, `num_updates_per_batch` epochs of minibatch steps on brax's
+    PPO loss, gradients averaged over the pmap axis AXIS. With `scaled_lr`, each Adam step is
+    multiplied by `lr_scale` (Adam's step is proportional to its learning rate)."""
+    loss_and_grad = gradients.loss_and_pgrad(
+        functools.partial(ppo_losses.compute_ppo_loss, ppo_network=network, entropy_cost=settings.entropy_cost,
+                          discounting=settings.discounting, reward_scaling=settings.reward_scaling,
+                          gae_lambda=settings.gae_lambda, clipping_epsilon=settings.clipping_epsilon,
+                          normalize_advantage=True, vf_coefficient=settings.vf_loss_coefficient),
+        pmap_axis_name=AXIS, has_aux=True)
+
+    def minibatch_step(carry, data, normalizer, lr_scale):
+        opt_state, params, key = carry
+        key, key_loss = jax.random.split(key)
+        _, grads = loss_and_grad(params, normalizer, data, key_loss)
+        step, opt_state = optimizer.update(grads, opt_state)
+        if scaled_lr:
+            step = jax.tree.map(lambda x: x * lr_scale, step)
+        return (opt_state, optax.apply_updates(params, step), key), None
+
+    def sgd_epoch(carry, _, data, normalizer, lr_scale):
+        opt_state, params, key = carry
+        key, key_perm, key_grad = jax.random.split(key, 3)
+        shuffled = jax.tree.map(lambda x: jax.random.permutation(key_perm, x).reshape(
+            (settings.num_minibatches, -1) + x.shape[1:]), data)
+        (opt_state, params, _), _ = jax.lax.scan(
+            functools.partial(minibatch_step, normalizer=normalizer, lr_scale=lr_scale),
+            (opt_state, params, key_grad), shuffled, length=settings.num_minibatches)
+        return (opt_state, params, key), None
+
+    def sgd(opt_state, params, normalizer, data, key, lr_scale=1.0):
+        (opt_state, params, _), _ = jax.lax.scan(
+            functools.partial(sgd_epoch, data=data, normalizer=normalizer, lr_scale=lr_scale),
+            (opt_state, params, key), (), length=settings.num_updates_per_batch)
+        return opt_state, params
+
+    return sgd
