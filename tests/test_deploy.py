@@ -198,7 +198,7 @@ def test_play_bad_input_is_one_line(tmp_path):
         ("policies/goal.onnx", "--episodes", "0"): "--episodes must be at least 1",
         ("policies/goal.onnx", "--goal_distance", "-1"): "goal_distance must be",
         ("policies/goal.onnx", "--terrain", "bumps", "--terrain_difficulty", "2"): "terrain_difficulty is a fraction",
-        ("policies/goal.onnx", "--terrain", "lava"): "unknown terrain 'lava'",
+        ("policies/goal.onnx", "--terrain", "lava"): "invalid choice: 'lava'",
     }
     for args, message in cases.items():
         proc = run_play("--policy", *args, "--no_video")

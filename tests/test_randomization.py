@@ -149,7 +149,8 @@ def test_a_late_command_leaves_the_previous_one_acting(env, step, state0):
     on_time = step(state0, jp.asarray(previous, jp.float32))
     np.testing.assert_allclose(delayed.pipeline_state.qpos, on_time.pipeline_state.qpos, atol=1e-5)
     np.testing.assert_allclose(delayed.pipeline_state.ctrl, lo + 0.85 * (hi - lo), atol=1e-5)
-    latencies = jax.vmap(late.draw_latency)(jax.random.split(jax.random.PRNGKey(0), 500))
+    draw = jax.vmap(lambda key: events.draw_latency(late.config.action_latency, DRAWS, key))
+    latencies = draw(jax.random.split(jax.random.PRNGKey(0), 500))
     assert 0 <= float(latencies.min()) and float(latencies.max()) <= 1 and float(latencies.std()) > 0.2
 
 

@@ -158,7 +158,7 @@ def test_sweep_spaces_are_checked_before_ray_starts(tmp_path):
 def test_the_best_trial_is_printed_as_a_train_command():
     cfg = config.TrainConfig(lr=0.0005, hidden=[64, 64], update_epochs=4, compile_cache=False, run_dir="runs/x")
     line = ray_runs.command_line(cfg)
-    assert line == "python train.py --lr 0.0005 --run_dir runs/x --update_epochs 4 --hidden 64 64 --no_compile_cache"
+    assert line == "python train.py --lr 0.0005 --update_epochs 4 --hidden 64 64 --run_dir runs/x --no_compile_cache"
     assert config.parse_args(line.split()[2:]) == dataclasses.replace(cfg, reward="goal_directed")
     rows_ = [{"steps": 100, "episode_return": 5.0, "success_rate": 0.5}, {"steps": 40, "episode_return": 9.0,
              "success_rate": 1.0}, {"steps": 100, "episode_return": 7.0, "success_rate": 0.5}]

@@ -1,10 +1,13 @@
 """Gymnasium environments: each task on native MuJoCo, and a NumPy vector environment over MJX.
 
-    import gymnasium as gym  # the ids are registered through Gymnasium's plugin entry point
+    import gymnasium as gym
 
-    env = gym.make("hexa_mjx/HexapodGoal-v0", render_mode="rgb_array")       # the report's task
-    env = gym.make("hexa_mjx/HexapodNavigate-v0", goal_max_distance=2.0)      # EnvConfig overrides
-    envs = hexa_mjx.engines.gym_envs.MJXVectorEnv(num_envs=256, task="navigate")      # for SB3 / CleanRL
+    env = gym.make("hexa_mjx.engines.gym_envs:hexa_mjx/HexapodGoal-v0", render_mode="rgb_array")
+    env = gym.make("hexa_mjx/HexapodNavigate-v0", goal_max_distance=2.0)  # once this module is imported
+    envs = MJXVectorEnv(num_envs=256, task="navigate")                   # for SB3 / CleanRL
+
+One id per task of the registry (`Task.gym_id`). Gymnasium 1.x has no plugin entry point any more,
+so an id names its module (the first form) or this module is imported first.
 
 The single environments (`HexapodGymEnv`) run `hexa_mjx.engines.native.NativeEnv`: the MJX environment's
 start, observation, action mapping, reward terms and termination on MuJoCo C. An episode ends

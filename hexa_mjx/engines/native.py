@@ -132,6 +132,11 @@ class NativeEnv:
         obs = self.episode.observe(d.qpos, d.qvel, d.ctrl, self.goal, self.heading, self.draws, None)
         return np.asarray(obs, np.float32)
 
+    def contact_counts(self) -> tuple[int, int]:
+        """(leg contacts while that foot is lifted, non-foot contacts) with the floor, now."""
+        c = self.contacts()
+        return self.robot.contact_counts(c.geom1, c.geom2, c.dist, c.foot_pos, self.config.lift_clearance)
+
     def contacts(self) -> Contacts:
         c = self.data.contact
         return Contacts(c.geom1, c.geom2, c.dist, self.data.geom_xpos[self.robot.feet])

@@ -48,7 +48,7 @@ class Run:
 
 
 def grid(study: str, out: Path, timesteps: int = 2_000_000, seeds: int | None = None,
-         num_envs: int = 256, task: str = "goal", **common) -> list[Run]:
+         num_envs: int = 256, task: str = tasks.DEFAULT_TASK, **common) -> list[Run]:
     """The runs of one study (report sections 4.2 to 4.4, or the navigation task's seeds) on `task`;
     `common` sets other TrainConfig fields of every run. A study on another task than the report's
     goes to <out>/<study>-<task>/."""
@@ -57,9 +57,9 @@ def grid(study: str, out: Path, timesteps: int = 2_000_000, seeds: int | None = 
     seeds = DEFAULT_SEEDS[study] if seeds is None else seeds
     if study == "navigate":
         study, task = "seeds", "navigate"
-    elif study in ("main", "energy") and task != "goal":
+    elif study in ("main", "energy") and task != tasks.DEFAULT_TASK:
         raise ValueError(f"the {study} study compares rewards of the report's task; run it without --task")
-    folder = study if task == "goal" else f"{study}-{task}"
+    folder = study if task == tasks.DEFAULT_TASK else f"{study}-{task}"
     if seeds < 1:
         raise ValueError(f"--seeds must be at least 1, got {seeds}")
     if study == "main":
@@ -81,7 +81,7 @@ def grid(study: str, out: Path, timesteps: int = 2_000_000, seeds: int | None = 
             run_dir = Path(out) / folder / f"{condition}-s{seed}"
             cfg = config.TrainConfig(num_envs=num_envs, num_timesteps=timesteps, seed=seed, task=task,
                                      run_dir=str(run_dir), **common, **settings)
-            cfg = dataclasses.replace(cfg, reward=cfg.reward or tasks.task_class(task).rewards[0])
+            cfg = dataclasses.replace(cfg, reward=cfg.reward or tasks.default_reward(task))
             runs.append(Run(study, condition, seed, cfg))
     return runs
 
@@ -159,7 +159,7 @@ def main(argv=None) -> int:
     parser.add_argument("--seeds", type=int, default=None, help="seeds per condition (default: main 5, ablation 1, lr 2, navigate 3)")
     parser.add_argument("--num_envs", type=int, default=256, help="environments per run (default: 256)")
     parser.add_argument("--out", type=Path, default=Path("experiments"), help="output folder (default: experiments)")
-    parser.add_argument("--task", default="goal", choices=sorted(tasks.TASKS),
+    parser.add_argument("--task", default=tasks.DEFAULT_TASK, choices=sorted(tasks.TASKS),
                         help="the task every run trains on (default: goal, the report's)")
     parser.add_argument("--max_contact_points", type=int, default=0,
                         help="MJX keeps only this many deepest robot-floor contact points per step (default 0: all)")
@@ -222,7 +222,7 @@ def sweep_main(args) -> int:
     space = ray_runs.load_space(args.space)
     base = config.TrainConfig(num_envs=args.num_envs, num_timesteps=args.timesteps, task=args.task,
                               num_evals=args.num_evals, max_contact_points=args.max_contact_points)
-    base = dataclasses.replace(base, reward=tasks.task_class(args.task).rewards[0],
+    base = dataclasses.replace(base, reward=tasks.default_reward(args.task),
                                cpu_devices=ray_runs.cpu_devices(base, args.run_cpus, args.run_gpus))
     config.check_ranges(base)
     ray_runs.check_address(args.ray or "local")
