@@ -2,6 +2,8 @@
 
 import dataclasses
 import json
+import subprocess
+import sys
 import tomllib
 
 import pytest
@@ -145,3 +147,9 @@ def test_reward_scale_flag_reaches_the_environment_and_survives_the_run_config(t
     assert scales["goal_reached"] == reward_variants()["navigate"]["goal_reached"]  # the rest untouched
     (tmp_path / "run" / "config.json").write_text(json.dumps(dataclasses.asdict(cfg)))
     assert config.make_env_for(config.load_config(tmp_path / "run")).scales["body_contact"] == -30.0
+
+
+@pytest.mark.parametrize("old, new", [("convert", "robot.convert"), ("sweeps", "studies.robustness")])
+def test_commands_of_earlier_versions_still_run(old, new):
+    proc = subprocess.run([sys.executable, "-m", f"hexa_mjx.{old}", "--help"], capture_output=True, text=True)
+    assert proc.returncode == 0 and f"python -m hexa_mjx.{new}" in proc.stdout, proc.stderr
