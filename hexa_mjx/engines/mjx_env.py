@@ -57,6 +57,11 @@ class JaxDraws:
     def choice(key, n, p):
         return jax.random.choice(key, n, p=p)
 
+    @staticmethod
+    def select(cond, if_true, if_false):
+        """`if_true()` where `cond`, else `if_false()`: under tracing both are computed."""
+        return jp.where(cond, if_true(), if_false())
+
 
 DRAWS = JaxDraws()
 

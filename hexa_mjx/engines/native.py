@@ -49,6 +49,11 @@ class NumpyDraws:
         p = np.asarray(p, float)
         return int(self.rng.choice(n, p=p / p.sum()))
 
+    @staticmethod
+    def select(cond, if_true, if_false):
+        """`if_true()` if `cond`, else `if_false()`: only the one taken is computed (and draws)."""
+        return if_true() if cond else if_false()
+
 
 class NativeEnv:
     """One environment of a task on MuJoCo C; `observe_as` names another task's observation."""
@@ -64,7 +69,7 @@ class NativeEnv:
         self.ranges, self.nominal = ranges, copy.copy(self.mj_model)
         self.data = mujoco.MjData(self.mj_model)
         self.rng = np.random.default_rng()
-        self.info = self.episode.start_info(NumpyDraws(self.rng), None)
+        self.info = self.episode.start_info(self.draws, None)
 
     @property
     def dt(self) -> float:

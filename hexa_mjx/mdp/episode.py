@@ -68,7 +68,7 @@ class Episode:
         cfg = self.config
         qpos = events.start_qpos(qpos0, cfg.start_joint_noise, self.task.start_yaw_range, self.robot.joint_lo,
                                  self.robot.joint_hi, draws, key)
-        if spawn is not None and cfg.curriculum_levels:
+        if spawn is not None and cfg.curriculum_levels:  # training only, so JAX only
             qpos = qpos.at[:2].add(events.level_spawn(level, spawn, draws, draws.fold_in(key, 6)))
         return qpos
 
@@ -133,7 +133,9 @@ class Episode:
         level = info["level"]
         if cfg.curriculum_levels:
             level = curriculum.next_level(level, cfg.curriculum_levels, completed, over, done | (goals == 0))
-        next_goal = xp.where(completed, self.task.next_goal(qpos, goal, goals, draws, key, level), goal)
+        # A new goal is drawn only on the step that completes one (native MuJoCo draws nothing else).
+        next_goal = draws.select(completed, lambda: self.task.next_goal(qpos, goal, goals, draws, key, level),
+                                 lambda: goal)
         success = xp.maximum(info["success"], reached.astype(xp.float32))
         info = {**info, "t": t, "success": success, "goals": goals, "level": level, "air_time": air_time,
                 "stance_avg": stance_avg}
