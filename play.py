@@ -6,6 +6,9 @@
     python play.py --policy policies/navigate.onnx --viewer          # drag the goal around
     python play.py --policy runs/goal_directed-s0                    # a run or checkpoint (exports it first)
     python play.py --policy policies/navigate.onnx --terrain bumps --terrain_seed 1 --episodes 64 --no_video
+    python play.py --policy policies/velocity.onnx --viewer          # drive it: arrows/WASD, Q/E, space
+    python play.py --policy policies/velocity.onnx --commands drive.csv --episode_length 1200
+    python play.py --policy policies/velocity.onnx --follow --waypoints "2,0 2,2 0,2 0,0" --episode_length 2400
 
 With an ONNX file, this imports only mujoco, onnxruntime and NumPy (and imageio for the video).
 """
@@ -18,6 +21,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+import numpy as np
 
 try:
     from hexa_mjx import cli
@@ -39,6 +44,13 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--randomize", action="store_true", help="a randomized physics model every episode (friction, "
                    "masses, payload, servo gains and limits, damping, armature: hexa_mjx.mdp.randomization.Ranges)")
     cli.add_env_flags(p, unset="the policy's own")
+    drive = p.add_argument_group("driving a velocity policy")
+    drive.add_argument("--commands", default="", help="a schedule of (t, vx, vy, yaw_rate) rows, CSV or JSON "
+                       "(hexa_mjx.deploy.commands; docs/DEPLOYMENT.md), instead of the task's random commands")
+    drive.add_argument("--follow", action="store_true", help="walk --waypoints with the path follower, which turns "
+                       "the path into velocity commands (pure pursuit)")
+    drive.add_argument("--follow_speed", type=float, default=0.5, help="m/s, the path follower's cruising speed "
+                       "(default: 0.5)")
     p.add_argument("--solver", default="trained", choices=["trained", "default"],
                    help="'trained': the model's fast solver setting (1 iteration); 'default': MuJoCo's default "
                         "accuracy (100 iterations, 50 line-search), the sim-to-sim check")
@@ -51,6 +63,13 @@ def parse_args(argv=None) -> argparse.Namespace:
         p.error("--viewer needs a display, and neither DISPLAY nor WAYLAND_DISPLAY is set: run without --viewer "
                 "to write an MP4, or start it under a display (for example `xvfb-run python play.py ...`)")
     return args
+
+
+def cli_waypoints(args):
+    """The --waypoints as an (n, 2) array, m from the start."""
+    import numpy as np
+
+    return np.array(cli.parse_waypoints(args.waypoints), float)
 
 
 def onnx_file(policy: str, scratch: str) -> Path:
@@ -74,7 +93,7 @@ def main(argv=None) -> int:
     if args.viewer:
         os.environ["MUJOCO_GL"] = "glfw"  # the window's OpenGL, not the off-screen default
     try:
-        from hexa_mjx.deploy import player
+        from hexa_mjx.deploy import commands, player
         from hexa_mjx.tasks import TASKS
         from hexa_mjx.evaluation import video
     except ImportError as e:  # a missing package, or a MUJOCO_GL that MuJoCo cannot use
@@ -87,9 +106,24 @@ def main(argv=None) -> int:
         overrides = cli.env_overrides(args)
         if args.solver == "default":
             overrides.update(solver_iterations=100, ls_iterations=50)  # MuJoCo's defaults
-        if args.waypoints and not TASKS[policy.metadata["task"]].follows_waypoints:
+        if args.waypoints and not (TASKS[policy.metadata["task"]].follows_waypoints or args.follow):
             raise ValueError(f"--waypoints need a task that follows a path; this is a {policy.metadata['task']}-task "
                              "policy")
+        velocity = TASKS[policy.metadata["task"]].uses_command
+        if (args.commands or args.follow) and not velocity:
+            raise ValueError(f"--commands and --follow drive a velocity policy; this is a {policy.metadata['task']}-task "
+                             "policy")
+        if args.follow and not args.waypoints:
+            raise ValueError('--follow walks a path: give it with --waypoints "x,y x,y ..."')
+        if args.commands and args.follow:
+            raise ValueError("--commands and --follow both set the commands: choose one")
+        if velocity and args.waypoints and not args.follow:
+            raise ValueError("a velocity policy walks waypoints through the path follower: add --follow")
+        if not (0 < args.follow_speed <= 5):
+            raise ValueError(f"--follow_speed is a speed in m/s above 0 (at most 5), got {args.follow_speed}")
+        schedule = commands.Schedule(commands.load_schedule(args.commands)) if args.commands else None
+        if args.waypoints and velocity:
+            overrides.pop("waypoints")  # the follower walks them, not the task
         env = player.env_for(policy, args.model, randomize=args.randomize, **overrides)
         if args.json:
             out = Path(args.json)
@@ -118,7 +152,12 @@ def main(argv=None) -> int:
     print(f"{policy.path}: {task} policy on native MuJoCo, {args.episodes} episode(s)")
     episodes, start = [], time.perf_counter()
     for i in range(args.episodes):
-        ep = player.run_episode(policy, env, args.seed + i, record=(i == 0 and not args.no_video))
+        source = schedule
+        if args.follow:
+            start = env.robot.start_xy
+            source = commands.PathFollower(start + cli_waypoints(args), env.task.command_ranges, speed=args.follow_speed,
+                                           success_radius=env.config.success_radius)
+        ep = player.run_episode(policy, env, args.seed + i, record=(i == 0 and not args.no_video), source=source)
         episodes.append(ep)
         print(f"episode {i:3d}: {'success' if ep['success'] else 'no success':10s} final distance "
               f"{ep['final_distance']:.2f} m  goals {ep['goals_reached']:2d}  {'fell' if ep['fell'] else 'upright'}  "
@@ -130,6 +169,15 @@ def main(argv=None) -> int:
           f"{s['feet_only_share']:.1%} of steps, speed to the first goal "
           f"{'-' if s['speed_to_first_goal'] is None else format(s['speed_to_first_goal'], '.3f')} m/s; {sum(e['steps'] for e in episodes) / elapsed:,.0f} control steps/s "
           f"with the policy (one core)")
+    if env.task.uses_command:
+        t = player.tracking(env, episodes)
+        drift = t["stand_drift"]
+        print(f"tracking ({t['settle_s']} s after each change left out, {t['average_s']} s average): velocity RMS "
+              f"{t.get('velocity_rms', float('nan')):.3f} m/s, yaw rate RMS {t.get('yaw_rate_rms', float('nan')):.3f} "
+              f"rad/s" + (f", drift commanded to stand {drift['speed_mean']:.3f} m/s" if drift["commands"] else ""))
+        if args.follow:
+            done = [e.get("waypoints_reached", 0) == len(cli_waypoints(args)) for e in episodes]
+            print(f"path follower: every waypoint reached in {sum(done)} of {len(done)} episodes")
     if args.json:
         player.write_json(Path(args.json), policy, env, episodes)
         print(f"wrote {args.json}")
@@ -137,7 +185,10 @@ def main(argv=None) -> int:
         path = Path(args.video or f"play-{policy.path.stem}.mp4")
         traj = episodes[0]["trajectory"]
         try:
-            video.render_video(env, traj["qpos"], path, traj["goal"], env.config.waypoints)
+            shown = traj.get("commanded")
+            shown = None if shown is None else shown[np.minimum(np.arange(len(traj["qpos"])), len(shown) - 1)]
+            video.render_video(env, traj["qpos"], path, traj["goal"], cli_waypoints(args) if args.follow else
+                               env.config.waypoints, commands=shown)
         except RuntimeError as e:
             print(f"error: {e}", file=sys.stderr)
             return 2

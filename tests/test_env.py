@@ -143,8 +143,8 @@ def test_goal_bonus_is_paid_only_on_feet(env, state0):
         data = mjx.forward(env.mjx_model, state0.pipeline_state.replace(qpos=qpos))
         info = env.episode.start_info(DRAWS, jax.random.PRNGKey(0))
         _, terms, _, _ = env.episode.transition(info, data.qpos, data.qpos, data.qvel, env.goal(data), env.heading(data),
-                                                env.contacts(data), data.actuator_force, jp.array(True), DRAWS,
-                                                jax.random.PRNGKey(1))
+                                                env.command(data), env.contacts(data), data.actuator_force,
+                                                jp.array(True), DRAWS, jax.random.PRNGKey(1))
         return terms["goal_bonus"]
     bonus = jax.jit(bonus)
     lying = np.array(env.mj_model.key_qpos[0])

@@ -49,8 +49,8 @@ def test_rewards_are_logged_per_term_and_pay_for_facing_the_heading(stand_env, s
     nxt = jax.jit(stand_env.step)(state, jp.zeros(stand_env.action_size))
     assert {"reward/spot_tracking", "reward/heading_tracking"} <= set(nxt.metrics)
     qpos = state.pipeline_state.qpos
-    facing = stand.heading_tracking(None, qpos, None, None, yaw(qpos[3:7]))
-    away = stand.heading_tracking(None, qpos, None, None, yaw(qpos[3:7]) + np.pi)
+    facing = stand.heading_tracking(None, qpos, None, None, yaw(qpos[3:7]), None)
+    away = stand.heading_tracking(None, qpos, None, None, yaw(qpos[3:7]) + np.pi, None)
     assert float(facing) == pytest.approx(1.0) and float(away) < 1e-6
     reached = stand_env.task.reached(jp.float32(0.0), qpos, yaw(qpos[3:7]) + 2 * stand.HEADING_TOLERANCE)
     assert not bool(reached) and bool(stand_env.task.reached(jp.float32(0.0), qpos, yaw(qpos[3:7])))

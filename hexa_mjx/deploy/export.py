@@ -105,6 +105,7 @@ def deployment_metadata(env, cfg, step: int, source: str) -> dict:
         "control_hz": env.config.ctrl_hz,
         "physics_dt_s": float(model.opt.timestep),
         "env_config": env_config,
+        **({"command": env.task.command_fields()} if env.task.uses_command else {}),
         "model": {"file": model_path.name, "sha256": hashlib.sha256(model_path.read_bytes()).hexdigest()},
         "trained": {"step": step, "source": source, "train_config": dataclasses.asdict(cfg)},
     }

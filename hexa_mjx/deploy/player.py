@@ -89,20 +89,37 @@ def model_matches(policy: OnnxPolicy, env: NativeEnv) -> bool:
     return hashlib.sha256(Path(env.config.model_path).read_bytes()).hexdigest() == policy.metadata["model"]["sha256"]
 
 
-def run_episode(policy: OnnxPolicy, env: NativeEnv, seed: int, record: bool = False) -> dict:
-    """One deterministic episode from the start drawn by `seed`; `record` keeps qpos and goal per step."""
+def run_episode(policy: OnnxPolicy, env: NativeEnv, seed: int, record: bool = False, source=None) -> dict:
+    """One deterministic episode from the start drawn by `seed`; `record` keeps qpos and goal per
+    step. `source(t, env) -> (vx, vy, yaw rate)` (hexa_mjx.deploy.commands) drives a velocity
+    policy instead of the task's own random commands; a source with a `goal` (the path follower)
+    also moves the goal marker. Velocity policies record their commands and velocities."""
     obs = env.reset(seed=seed)
+    if hasattr(source, "reset"):
+        source.reset(env.data.qpos[:2])
     start_goal_dist = env.goal_distance()
     qpos, goals = [env.data.qpos.copy()], [env.goal]
+    commanding = env.task.uses_command
+    track = {"command": [], "commanded": [], "velocity": []}
     total, feet_only, steps, first_arrival = 0.0, 0, 0, None
     while True:
+        if source is not None:
+            env.set_command([*source(steps * env.dt, env), 0.0])
+            if hasattr(source, "goal"):
+                env.set_goal(source.goal)
+            obs = env.observe()
+        if commanding:
+            track["command"].append(env.command)
+            track["commanded"].append(env.task.commanded(env.command, env.data.qpos, env.heading))
         obs, reward, terminated, truncated, info = env.step(policy(obs))
         total += reward
         steps += 1
         feet_only += info["feet_only"]
+        if commanding:
+            track["velocity"].append(env.task.measured(env.data.qpos, env.data.qvel))
         if info["success"] and first_arrival is None:
             first_arrival = steps * env.dt
-        if record:
+        if record or commanding:
             qpos.append(env.data.qpos.copy())
             goals.append(env.goal)
         if terminated or truncated:
@@ -111,9 +128,31 @@ def run_episode(policy: OnnxPolicy, env: NativeEnv, seed: int, record: bool = Fa
               "fell": info["fell"], "nonfinite": info["nonfinite"], "goals_reached": info["goals_reached"],
               "steps": steps, "return": total, "feet_only_share": feet_only / steps,
               "first_arrival_s": first_arrival, "first_goal_distance": start_goal_dist}
-    if record:
-        result["trajectory"] = {"qpos": np.array(qpos), "goal": np.array(goals)}
+    if hasattr(source, "reached"):
+        result["waypoints_reached"] = source.reached
+    if record or commanding:
+        result["trajectory"] = {"qpos": np.array(qpos), "goal": np.array(goals),
+                                **({k: np.array(v) for k, v in track.items()} if commanding else {})}
     return result
+
+
+def tracking(env: NativeEnv, episodes: list[dict]) -> dict:
+    """The velocity task's tracking figures (hexa_mjx.evaluation.tracking) over recorded episodes."""
+    from hexa_mjx.evaluation import tracking as figures
+
+    steps = max(e["steps"] for e in episodes)
+    traj = {k: np.zeros((steps, len(episodes), *episodes[0]["trajectory"][k].shape[1:]))
+            for k in ("command", "commanded", "velocity")}
+    traj["qpos"] = np.zeros((steps, len(episodes), env.mj_model.nq))
+    alive = np.zeros((steps, len(episodes)))
+    for i, e in enumerate(episodes):
+        n = e["steps"]
+        for k in ("command", "commanded", "velocity"):
+            traj[k][:n, i] = e["trajectory"][k]
+        traj["qpos"][:n, i] = e["trajectory"]["qpos"][1:]
+        alive[:n, i] = 1.0
+    summary, _ = figures.tracking_summary(env.task, env.dt, traj, alive, None)
+    return summary
 
 
 def summarize(episodes: list[dict]) -> dict:
@@ -164,12 +203,19 @@ def view(policy: OnnxPolicy, env: NativeEnv, seed: int = 0) -> None:
     """Run the policy in MuJoCo's interactive viewer, in real time, until the window closes.
 
     The goal is the `goal` mocap body: double-click it and Ctrl+right-drag to move it, or use
-    I/J/K/L (+x, +y, -x, -y by 0.25 m), N (a new goal from the task) and R (a new episode)."""
+    I/J/K/L (+x, +y, -x, -y by 0.25 m), N (a new goal from the task) and R (a new episode). A
+    velocity policy is driven from the keyboard instead (hexa_mjx.deploy.commands.KEY_STEPS):
+    arrows or W/A/S/D for the planar velocity, Q/E for the yaw rate, space to stop; the command is
+    drawn on the robot."""
     import time
 
     import mujoco.viewer
 
+    from hexa_mjx.deploy.commands import Keyboard
+    from hexa_mjx.evaluation.video import draw_command
+
     pending = []
+    keyboard = Keyboard(env.task.command_ranges) if env.task.uses_command else None
     with mujoco.viewer.launch_passive(env.mj_model, env.data, key_callback=pending.append) as viewer:
         with viewer.lock():  # follow the torso from behind and above
             viewer.cam.type = mujoco.mjtCamera.mjCAMERA_TRACKING
@@ -180,7 +226,10 @@ def view(policy: OnnxPolicy, env: NativeEnv, seed: int = 0) -> None:
             tick = time.perf_counter()
             with viewer.lock():
                 for key in pending:
-                    if key in GOAL_KEYS:
+                    if keyboard is not None and keyboard.press(key):
+                        print(f"command: vx {keyboard.command[0]:+.2f} m/s, vy {keyboard.command[1]:+.2f} m/s, "
+                              f"yaw rate {keyboard.command[2]:+.2f} rad/s", flush=True)
+                    elif key in GOAL_KEYS:
                         env.set_goal(env.goal + np.array(GOAL_KEYS[key]))
                     elif key == NEW_GOAL_KEY:
                         env.set_goal(env.new_goal())
@@ -188,6 +237,11 @@ def view(policy: OnnxPolicy, env: NativeEnv, seed: int = 0) -> None:
                         episode += 1
                         obs = env.reset(seed=seed + episode)
                 pending.clear()
+                if keyboard is not None:
+                    env.set_command([*keyboard.command, 0.0])
+                    obs = env.observe()
+                    viewer.user_scn.ngeom = 0
+                    draw_command(viewer.user_scn, env.data.qpos, keyboard.command)
                 obs, _, terminated, truncated, _ = env.step(policy(obs))
                 if terminated or truncated:
                     episode += 1

@@ -59,8 +59,8 @@ class JaxDraws:
 
     @staticmethod
     def select(cond, if_true, if_false):
-        """`if_true()` where `cond`, else `if_false()`: under tracing both are computed."""
-        return jp.where(cond, if_true(), if_false())
+        """`if_true()` where `cond`, else `if_false()` (trees of arrays): under tracing both are computed."""
+        return jax.tree.map(lambda a, b: jp.where(cond, a, b), if_true(), if_false())
 
 
 DRAWS = JaxDraws()
@@ -127,7 +127,8 @@ class HexapodEnv(Env):
     @property
     def fresh_starts(self) -> bool:
         """Whether episodes start from random states (training must redraw them at every reset)."""
-        return bool(self.config.start_joint_noise or self.start_yaw_range or self.task.uses_heading)
+        return bool(self.config.start_joint_noise or self.start_yaw_range or self.task.uses_heading
+                    or self.task.uses_command)
 
     @property
     def start_yaw_range(self) -> float:
@@ -173,10 +174,10 @@ class HexapodEnv(Env):
                             qvel=jp.where(jp.isfinite(data.qvel), data.qvel, 0.0))
 
         rng, key = jax.random.split(info["rng"])
-        info, terms, fig, goal = episode.transition(info, prev.qpos, data.qpos, data.qvel, self.goal(data),
-                                                     self.heading(data), self.contacts(data), data.actuator_force,
-                                                     finite, DRAWS, key)
-        data = self.set_goal(data, goal)
+        info, terms, fig, target = episode.transition(info, prev.qpos, data.qpos, data.qvel, self.goal(data),
+                                                       self.heading(data), self.command(data), self.contacts(data),
+                                                       data.actuator_force, finite, DRAWS, key)
+        data = self.set_target(data, **target)
         info = episode.restart_info({**info, "rng": rng}, fig["over"], DRAWS, key, info.get("leg_failure_rate"),
                                     info.get("leg_failure_p"))
         over, dist, success, scaled = fig["over"], fig["distance"], fig["success"], episode.scaled(terms)
@@ -212,14 +213,15 @@ class HexapodEnv(Env):
         qpos = self.episode.start_qpos(self._qpos0, DRAWS, rng, level, spawn)
         data = data.replace(qpos=qpos, qvel=self._qvel0, ctrl=self._ctrl0, time=jp.zeros_like(data.time))
         key = jax.random.fold_in(rng, 2)
-        data = self.set_goal(data, self.task.first_goal(qpos, DRAWS, key, level))
-        if self.task.uses_heading:
-            data = self.set_heading(data, self.task.goal_heading(qpos, DRAWS, jax.random.fold_in(key, 1)))
-        return data
+        heading = self.task.goal_heading(qpos, DRAWS, jax.random.fold_in(key, 1))
+        command, commanded_heading = self.task.first_command(qpos, DRAWS, jax.random.fold_in(key, 3))
+        return self.set_target(data, self.task.first_goal(qpos, DRAWS, key, level),
+                               heading if commanded_heading is None else commanded_heading, command)
 
     def observe(self, data: mjx.Data) -> jax.Array:
         """The policy's observation of a physics state (reads only qpos, qvel, ctrl and the goal)."""
-        return self.episode.observer.observe(data.qpos, data.qvel, data.ctrl, self.goal(data), self.heading(data))
+        return self.episode.observer.observe(data.qpos, data.qvel, data.ctrl, self.goal(data), self.heading(data),
+                                             self.command(data))
 
     # -- the goal marker and contacts ------------------------------------------
 
@@ -237,6 +239,17 @@ class HexapodEnv(Env):
     def set_heading(self, data: mjx.Data, heading: jax.Array) -> mjx.Data:
         quat = jp.stack([jp.cos(heading / 2), 0.0 * heading, 0.0 * heading, jp.sin(heading / 2)])
         return data.replace(mocap_quat=data.mocap_quat.at[self.robot.goal_mocap].set(quat))
+
+    def command(self, data: mjx.Data) -> jax.Array:
+        """The task's command (the model's userdata; hexa_mjx.tasks.velocity)."""
+        return data.userdata
+
+    def set_target(self, data: mjx.Data, goal, heading=None, command=None) -> mjx.Data:
+        """`data` with the task's goal and, where given, heading and command."""
+        data = self.set_goal(data, goal)
+        if heading is not None and (self.task.uses_heading or self.task.uses_command):
+            data = self.set_heading(data, heading)
+        return data if command is None else data.replace(userdata=command)
 
     def goal_distance(self, data: mjx.Data) -> jax.Array:
         """Planar distance from the torso origin to the current goal, m."""

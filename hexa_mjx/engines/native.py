@@ -105,6 +105,18 @@ class NativeEnv:
     def set_heading(self, heading: float) -> None:
         self.data.mocap_quat[self.robot.goal_mocap] = [np.cos(heading / 2), 0.0, 0.0, np.sin(heading / 2)]
 
+    @property
+    def command(self) -> np.ndarray:
+        """The task's command (the model's userdata; hexa_mjx.tasks.velocity)."""
+        return self.data.userdata.copy()
+
+    def set_command(self, command, heading=None) -> None:
+        """Set the task's command (and the heading it turns to in heading mode): play.py's
+        keyboard and command schedules drive the velocity task with it."""
+        self.data.userdata[:] = command
+        if heading is not None:
+            self.set_heading(float(heading))
+
     def goal_distance(self) -> float:
         return float(np.linalg.norm(self.goal - self.data.qpos[:2]))
 
@@ -128,13 +140,15 @@ class NativeEnv:
         self.set_goal(self.task.first_goal(qpos, draws, None))
         if self.task.uses_heading:
             self.set_heading(self.task.goal_heading(qpos, draws, None))
+        if self.task.uses_command:
+            self.set_command(*self.task.first_command(qpos, draws, None))
         mujoco.mj_forward(self.mj_model, data)
         return self.observe()
 
     def observe(self) -> np.ndarray:
         """The policy's observation, with the configured noise."""
         d = self.data
-        obs = self.episode.observe(d.qpos, d.qvel, d.ctrl, self.goal, self.heading, self.draws, None)
+        obs = self.episode.observe(d.qpos, d.qvel, d.ctrl, self.goal, self.heading, self.command, self.draws, None)
         return np.asarray(obs, np.float32)
 
     def contact_counts(self) -> tuple[int, int]:
@@ -167,10 +181,12 @@ class NativeEnv:
         if not finite:  # keep the last finite state and end the episode
             data.qpos[:], data.qvel[:] = prev_qpos, prev_qvel
             mujoco.mj_forward(model, data)
-        self.info, terms, fig, goal = episode.transition(self.info, prev_qpos, data.qpos, data.qvel, self.goal,
-                                                          self.heading, self.contacts(), data.actuator_force,
-                                                          np.bool_(finite), draws, None)
-        self.set_goal(goal)
+        self.info, terms, fig, target = episode.transition(self.info, prev_qpos, data.qpos, data.qvel, self.goal,
+                                                            self.heading, self.command, self.contacts(),
+                                                            data.actuator_force, np.bool_(finite), draws, None)
+        self.set_goal(target["goal"])
+        if self.task.uses_command:
+            self.set_command(target["command"], target["heading"])
         reward = float(sum(episode.scaled(terms).values()))
         info = {"terms": {name: float(value) for name, value in terms.items()}, "distance": float(fig["distance"]), "success": bool(fig["success"]),
                 "goals_reached": int(fig["goals"]), "fell": bool(fig["fell"]), "nonfinite": not finite,

@@ -83,6 +83,11 @@ def rollout(env, policy, num_episodes: int, seed: int = 0, ranges=None):
                    **{k: v for k, v in nxt.metrics.items()
                       if k.startswith("reward/") or k in ("distance", "success", "fell", "goal_bonus", "nonfinite",
                                                           "goals_reached")}}
+            if env.task.uses_command:  # the command each step answers, and the velocity it reached
+                out.update(command=jax.vmap(env.command)(state.pipeline_state),
+                           commanded=jax.vmap(lambda d: env.task.commanded(env.command(d), d.qpos, env.heading(d)))(
+                               state.pipeline_state),
+                           velocity=jax.vmap(lambda d: env.task.measured(d.qpos, d.qvel))(nxt.pipeline_state))
             return (nxt, alive * (1.0 - nxt.done)), out
 
         start_qpos = state.pipeline_state.qpos
@@ -238,7 +243,8 @@ def evaluate(ckpt: str | Path, episodes: int = 128, videos: int = 1, out: str | 
             frames = np.concatenate([start[i:i + 1], traj["qpos"][:n, i]])
             goals = traj["goal"][np.minimum(np.arange(n + 1), n - 1), i]  # each frame: the goal walked to next
             path = out / f"episode_{i}.mp4"
-            render_video(env, frames, path, goals, env.config.waypoints, shadows=shadows)
+            commands = traj["commanded"][np.minimum(np.arange(n + 1), n - 1), i] if "commanded" in traj else None
+            render_video(env, frames, path, goals, env.config.waypoints, shadows=shadows, commands=commands)
             result["videos"].append(str(path))
     atomic.write(out / "metrics.json", json.dumps(result, indent=1))
     return result

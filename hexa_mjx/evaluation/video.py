@@ -20,10 +20,11 @@ VIDEO_FPS = 30  # frames per second of videos (real time: every ctrl_hz / 30th c
 
 
 def render_video(env, qpos_frames: np.ndarray, path: Path, goals: np.ndarray, waypoints=(), width=640,
-                 height=480, fps: float = VIDEO_FPS, shadows: bool = False) -> int:
+                 height=480, fps: float = VIDEO_FPS, shadows: bool = False, commands=None) -> int:
     """Render qpos frames (T, nq, one per control step) from the tracking camera into a real-time
-    MP4 of about `fps` frames per second, with the goal marker at each frame's goal (T, 2) and the
-    waypoint path (start -> waypoints) drawn. Returns the number of frames written.
+    MP4 of about `fps` frames per second, with the goal marker at each frame's goal (T, 2), the
+    waypoint path (start -> waypoints) and each frame's velocity command (T, 3; `draw_command`)
+    drawn. Returns the number of frames written.
 
     Shadows and the skybox are off unless `shadows`: with software OpenGL (no GPU) they cost 5x
     the frame rate (docs/RESULTS.md, "Evaluation time")."""
@@ -52,7 +53,8 @@ def render_video(env, qpos_frames: np.ndarray, path: Path, goals: np.ndarray, wa
     warnings.filterwarnings("ignore", message=r"os\.fork\(\) was called", category=RuntimeWarning)
     with atomic.replacing(path) as tmp, imageio.get_writer(tmp, fps=1 / (env.dt * stride), codec="libx264",
                                                             quality=7, macro_block_size=16) as writer:
-        for qpos, goal in zip(qpos_frames[::stride], goals[::stride]):
+        commands = [None] * len(qpos_frames) if commands is None else commands
+        for qpos, goal, command in zip(qpos_frames[::stride], goals[::stride], commands[::stride]):
             data.qpos[:] = qpos
             data.mocap_pos[mocap, :2] = goal
             mujoco.mj_forward(model, data)
@@ -61,6 +63,8 @@ def render_video(env, qpos_frames: np.ndarray, path: Path, goals: np.ndarray, wa
             renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = shadows
             if waypoints:
                 draw_path(renderer.scene, corners)
+            if command is not None:
+                draw_command(renderer.scene, qpos, command)
             writer.append_data(renderer.render())
             written += 1
     renderer.close()
@@ -79,6 +83,42 @@ def draw_path(scene, corners: np.ndarray, width=0.01, height=0.003) -> None:
                             np.array([0.9, 0.5, 0.1, 1.0], np.float32))
         mujoco.mjv_connector(geom, mujoco.mjtGeom.mjGEOM_CAPSULE, width, np.array([*a, height]),
                              np.array([*b, height]))
+        scene.ngeom += 1
+
+
+ARROW_M_PER_MPS = 0.4  # m of arrow per m/s of commanded velocity
+TURN_M_PER_RADPS = 0.1  # m of the turn arrow per rad/s of commanded yaw rate
+
+
+def draw_command(scene, qpos: np.ndarray, command) -> None:
+    """Add a velocity command (vx, vy, yaw rate; heading frame) to a MuJoCo scene at the torso in
+    pose `qpos`: a blue arrow for the planar velocity, an orange arrow across the front for the yaw
+    rate (to the left: counter-clockwise), a red ball for "stand still"."""
+    import mujoco
+
+    from hexa_mjx.robot.kinematics import yaw
+
+    heading = float(yaw(np.asarray(qpos[3:7])))
+    c, s = np.cos(heading), np.sin(heading)
+    world = lambda v: np.array([c * v[0] - s * v[1], s * v[0] + c * v[1], 0.0])  # noqa: E731
+    base = np.array([qpos[0], qpos[1], qpos[2] + 0.12])
+    vx, vy, wz = (float(x) for x in command[:3])
+    parts = []
+    if vx == 0 and vy == 0 and wz == 0:
+        parts.append((mujoco.mjtGeom.mjGEOM_SPHERE, base, base, [0.9, 0.1, 0.1, 1.0], 0.025))
+    if vx or vy:
+        parts.append((mujoco.mjtGeom.mjGEOM_ARROW, base, base + ARROW_M_PER_MPS * world((vx, vy)), [0.1, 0.3, 0.9, 1], 0.015))
+    if wz:
+        front = base + world((0.12, 0.0))
+        parts.append((mujoco.mjtGeom.mjGEOM_ARROW, front, front + TURN_M_PER_RADPS * wz * world((0.0, 1.0)),
+                      [0.95, 0.55, 0.1, 1], 0.012))
+    for kind, a, b, rgba, width in parts:
+        if scene.ngeom >= scene.maxgeom:
+            return
+        geom = scene.geoms[scene.ngeom]
+        mujoco.mjv_initGeom(geom, kind, np.full(3, width), a, np.eye(3).ravel(), np.array(rgba, np.float32))
+        if kind != mujoco.mjtGeom.mjGEOM_SPHERE:
+            mujoco.mjv_connector(geom, kind, width, a, b)
         scene.ngeom += 1
 
 

@@ -66,6 +66,18 @@ class EnvConfig:
                                         "reaches goals (hexa_mjx.mdp.curriculum)")
     waypoints: tuple = setting((), "navigate: walk a path instead, \"x,y x,y ...\" in metres from the start, world "
                                    "frame, or a file holding that; the last waypoint stays the goal")
+    # Velocity commands (hexa_mjx.tasks.velocity): (vx, vy, yaw rate) in the heading frame, drawn
+    # uniformly in these ranges, held for command_interval, a share of them exactly zero (stand).
+    command_vx: tuple = setting((-0.5, 1.0), "velocity: m/s, forward speed range MIN MAX of the commands",
+                                nargs=2, type=float)
+    command_vy: tuple = setting((-0.5, 0.5), "velocity: m/s, sideways (left) speed range MIN MAX of the commands",
+                                nargs=2, type=float)
+    command_yaw_rate: tuple = setting((-1.5, 1.5), "velocity: rad/s, yaw rate range MIN MAX of the commands "
+                                      "(counter-clockwise positive)", nargs=2, type=float)
+    command_interval: float = setting(4.0, "velocity: s each command holds before the next is drawn")
+    command_zero_share: float = setting(0.1, "velocity: share of the commands that are exactly zero (stand still)")
+    command_heading_share: float = setting(0.0, "velocity: share of the commands that give a heading to turn to "
+                                                "instead of a yaw rate (legged_gym's heading mode)")
     # Leg failure: a failed leg's three servos stop working. The policy is not told which leg failed.
     disabled_legs: tuple = setting((), "legs whose servos fail in every episode, e.g. \"3\" or \"1 4\" "
                                        "(numbers from 1)")
@@ -163,6 +175,15 @@ def check_config(config: EnvConfig) -> None:
     if config.terrain != "flat" and config.curriculum_levels > LEVEL_TILES:
         raise ValueError(f"on a terrain the curriculum has at most {LEVEL_TILES} levels (the terrain's columns of "
                          f"squares), got curriculum_levels {config.curriculum_levels}")
+    for name in ("command_vx", "command_vy", "command_yaw_rate"):
+        bounds = getattr(config, name)
+        if len(bounds) != 2 or not all(math.isfinite(float(b)) for b in bounds) or bounds[0] > bounds[1]:
+            raise ValueError(f"{name} is a range MIN MAX of two finite numbers with MIN <= MAX, got {list(bounds)}")
+    if not (math.isfinite(config.command_interval) and config.command_interval > 0):
+        raise ValueError(f"command_interval must be a time above 0 s, got {config.command_interval}")
+    for name in ("command_zero_share", "command_heading_share"):
+        if not 0 <= getattr(config, name) <= 1:
+            raise ValueError(f"{name} is a share from 0 to 1, got {getattr(config, name)}")
     for point in config.waypoints:
         if len(point) != 2 or not all(math.isfinite(float(c)) for c in point):
             raise ValueError(f"a waypoint is a pair of finite coordinates x,y in metres, got {point}")

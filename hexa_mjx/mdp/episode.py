@@ -84,9 +84,9 @@ class Episode:
 
     # -- one control step -----------------------------------------------------
 
-    def observe(self, qpos, qvel, ctrl, goal, heading, draws, key):
+    def observe(self, qpos, qvel, ctrl, goal, heading, command, draws, key):
         """The policy's observation, with the configured noise."""
-        obs = self.observer.observe(qpos, qvel, ctrl, goal, heading)
+        obs = self.observer.observe(qpos, qvel, ctrl, goal, heading, command)
         return events.noisy(obs, self.noise_scale, draws, key) if self.config.obs_noise else obs
 
     def failed_servos(self, info):
@@ -102,11 +102,12 @@ class Episode:
         return events.servo_ctrl(step, delay, target, previous, qpos[self.robot.actuator_qpos], failed,
                                  self.config, self.robot.hold_ctrl)
 
-    def transition(self, info, prev_qpos, qpos, qvel, goal, heading, contacts: Contacts, actuator_force, finite,
-                   draws, key):
-        """Everything after the physics of one control step: termination, reward terms, goals and
-        bookkeeping. Returns (info, unscaled reward terms, figures, next goal); `figures` hold the
-        step's distance, success so far, goals, whether it fell, ended, reached or completed a goal."""
+    def transition(self, info, prev_qpos, qpos, qvel, goal, heading, command, contacts: Contacts, actuator_force,
+                   finite, draws, key):
+        """Everything after the physics of one control step: termination, reward terms, goals,
+        commands and bookkeeping. Returns (info, unscaled reward terms, figures, target): `figures`
+        hold the step's distance, success so far, goals, whether it fell, ended, reached or
+        completed a goal; `target` the next step's goal, heading and command."""
         xp, cfg = namespace(qpos), self.config
         fell = flipped(qpos[3:7])
         done = fell | ~finite
@@ -124,7 +125,7 @@ class Episode:
         terms = rewards.terms([name for name in self.active if name in rewards.TERMS], cfg, prev_qpos, qpos, qvel,
                               goal, bad, non_foot, done, completed, power, ground=self.robot.ground(qpos[:2]),
                               air_time=air_time, working=1.0 - info["failed_legs"], stance_avg=stance_avg)
-        terms.update(self.task.reward_terms(self.active, prev_qpos, qpos, qvel, goal, heading))
+        terms.update(self.task.reward_terms(self.active, prev_qpos, qpos, qvel, goal, heading, command))
         terms = {name: terms[name] for name in self.active}  # the scales' order: the reward sums in it
 
         t = info["t"] + 1
@@ -136,12 +137,13 @@ class Episode:
         # A new goal is drawn only on the step that completes one (native MuJoCo draws nothing else).
         next_goal = draws.select(completed, lambda: self.task.next_goal(qpos, goal, goals, draws, key, level),
                                  lambda: goal)
+        command, heading = self.task.next_command(t, command, heading, draws, draws.fold_in(key, 8))
         success = xp.maximum(info["success"], reached.astype(xp.float32))
         info = {**info, "t": t, "success": success, "goals": goals, "level": level, "air_time": air_time,
                 "stance_avg": stance_avg}
         figures = {"distance": dist, "success": success, "goals": goals, "fell": fell, "done": done, "over": over,
                    "reached": reached, "completed": completed, "non_foot": non_foot}
-        return info, terms, figures, next_goal
+        return info, terms, figures, {"goal": next_goal, "heading": heading, "command": command}
 
     def scaled(self, terms: dict) -> dict:
         """Each term times its scale."""

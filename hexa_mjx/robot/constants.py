@@ -23,6 +23,9 @@ TORSO_BODY = "base_link"  # the report URDF's root link (the environment uses th
 TORSO_GEOM = "torso"
 FLOOR_GEOM = "floor"
 GOAL_BODY = "goal"
+# The model's userdata holds a task's command: (vx m/s, vy m/s, yaw rate rad/s, heading mode 0/1)
+# for the velocity task, zeros for the others (hexa_mjx.tasks.velocity).
+COMMAND_SIZE = 4
 TRACKING_CAMERA = "track"
 
 

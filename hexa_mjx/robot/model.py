@@ -30,6 +30,7 @@ def load_model(path: Path, max_contact_points: int = 0, terrain: terrains.Terrai
             spec.delete(numeric)
     if max_contact_points:
         spec.add_numeric(name="max_contact_points", data=[max_contact_points])
+    spec.nuserdata = robot.COMMAND_SIZE  # a task's command is physics state (hexa_mjx.tasks.base)
     if terrain is None:
         return spec.compile()
     terrains.add_to_spec(spec, terrain, robot.FLOOR_GEOM, robot.FOOT_SUFFIX, robot.TORSO_GEOM)

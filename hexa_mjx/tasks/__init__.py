@@ -11,8 +11,9 @@ from hexa_mjx.tasks.base import Task
 from hexa_mjx.tasks.goal import GoalTask
 from hexa_mjx.tasks.navigate import NavigateTask
 from hexa_mjx.tasks.stand import StandTask
+from hexa_mjx.tasks.velocity import VelocityTask
 
-TASKS: dict[str, type[Task]] = {cls.name: cls for cls in (GoalTask, NavigateTask, StandTask)}
+TASKS: dict[str, type[Task]] = {cls.name: cls for cls in (GoalTask, NavigateTask, StandTask, VelocityTask)}
 DEFAULT_TASK = GoalTask.name  # the report's task
 
 

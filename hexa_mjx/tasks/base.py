@@ -5,7 +5,9 @@ A task is one module in `hexa_mjx.tasks` with one `Task` subclass, listed in the
 engine, so the MJX environment, native MuJoCo, Gymnasium, play.py and export all run the same code.
 
 The goal is the model's `goal` mocap body: its (x, y) is where the task sends the robot, and its
-heading (yaw, rad) what a task may ask the torso to face. Both are part of the physics state.
+heading (yaw, rad) what a task may ask the torso to face. A task's command (the velocity task's
+(vx, vy, yaw rate, heading mode)) is the model's `userdata`. All three are part of the physics
+state, so auto-resets restore them, trajectories carry them and videos draw them.
 """
 
 from __future__ import annotations
@@ -25,10 +27,11 @@ class Task:
     # Reward variants: name -> scales table of hexa_mjx.mdp.rewards terms (and the task's own
     # `terms`); the first is the task's default.
     rewards: dict[str, dict[str, float]] = {}
-    terms: dict = {}  # the task's own reward terms: name -> fn(prev_qpos, qpos, qvel, goal, heading)
+    terms: dict = {}  # the task's own reward terms: name -> fn(prev_qpos, qpos, qvel, goal, heading, command)
     gait_window = "to_goal"  # eval.py's gait analysis reads the walk to the first goal, or "alive" steps
     uses_heading = False  # whether the goal marker's heading is part of the task
     follows_waypoints = False  # whether EnvConfig.waypoints set its goals
+    uses_command = False  # whether the task draws commands (the model's userdata)
 
     def __init__(self, config, robot):
         self.config, self.robot = config, robot
@@ -68,14 +71,24 @@ class Task:
         """The goal that follows `goals` completed ones, from the state that completed the last."""
         return goal
 
-    def reward_terms(self, names, prev_qpos, qpos, qvel, goal, heading) -> dict:
+    def first_command(self, qpos, draws, key):
+        """(command, heading) of a new episode, for tasks with `uses_command`."""
+        return None, None
+
+    def next_command(self, t, command, heading, draws, key):
+        """(command, heading) after control step `t` of the episode: a task with `uses_command`
+        replaces them on its schedule."""
+        return command, heading
+
+    def reward_terms(self, names, prev_qpos, qpos, qvel, goal, heading, command) -> dict:
         """Unscaled values of the task's own terms among `names`."""
-        return {name: self.terms[name](prev_qpos, qpos, qvel, goal, heading) for name in names if name in self.terms}
+        return {name: self.terms[name](prev_qpos, qpos, qvel, goal, heading, command)
+                for name in names if name in self.terms}
 
     # -- what the policy sees -------------------------------------------------
 
-    def observe(self, qpos, qvel, ctrl, goal, heading):
-        """The policy's observation of a physics state."""
+    def observe(self, qpos, qvel, ctrl, goal, heading, command):
+        """The policy's observation of a physics state (`command`: the userdata)."""
         raise NotImplementedError
 
     @classmethod

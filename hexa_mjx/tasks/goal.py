@@ -30,7 +30,7 @@ class GoalTask(Task):
         xp = namespace(qpos)
         return xp.asarray(self.robot.start_xy, xp.float32) + xp.array([self.config.goal_distance, 0.0])
 
-    def observe(self, qpos, qvel, ctrl, goal, heading):
+    def observe(self, qpos, qvel, ctrl, goal, heading, command):
         return observations.goal_observation(qpos, qvel, goal)
 
     @classmethod

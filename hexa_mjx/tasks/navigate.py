@@ -57,7 +57,7 @@ class NavigateTask(Task):
             return self._waypoint(qpos, namespace(qpos).minimum(goals, len(self.config.waypoints) - 1))
         return self._draw_goal(qpos, draws, key, level)
 
-    def observe(self, qpos, qvel, ctrl, goal, heading):
+    def observe(self, qpos, qvel, ctrl, goal, heading, command):
         return observations.navigate_observation(qpos, qvel, ctrl, goal, self.robot.ctrl_lo, self.robot.ctrl_hi,
                                                  self.distance_cap)
 

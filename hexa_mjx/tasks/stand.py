@@ -27,14 +27,14 @@ def heading_error(qpos, heading):
     return xp.arctan2(xp.sin(diff), xp.cos(diff))
 
 
-def spot_tracking(prev_qpos, qpos, qvel, goal, heading):
+def spot_tracking(prev_qpos, qpos, qvel, goal, heading, command):
     """exp(-d^2 / SPOT_SIGMA) of the torso's planar distance d (m) from the spot: 1 on it."""
     xp = namespace(qpos)
     offset = goal - qpos[:2]
     return xp.exp(-(offset @ offset) / SPOT_SIGMA)
 
 
-def heading_tracking(prev_qpos, qpos, qvel, goal, heading):
+def heading_tracking(prev_qpos, qpos, qvel, goal, heading, command):
     """exp(-e^2 / HEADING_SIGMA) of the heading error e (rad): 1 facing the asked heading."""
     return namespace(qpos).exp(-heading_error(qpos, heading) ** 2 / HEADING_SIGMA)
 
@@ -63,7 +63,7 @@ class StandTask(Task):
     def reached(self, dist, qpos, heading):
         return (dist < self.config.success_radius) & (abs(heading_error(qpos, heading)) < HEADING_TOLERANCE)
 
-    def observe(self, qpos, qvel, ctrl, goal, heading):
+    def observe(self, qpos, qvel, ctrl, goal, heading, command):
         xp = namespace(qpos)
         error = heading_error(qpos, heading)
         return xp.concatenate([to_heading_frame(goal - qpos[:2], yaw(qpos[3:7])), xp.stack([xp.cos(error),

@@ -63,6 +63,12 @@ class TrainConfig:
     goal_min_distance: float = env_field("goal_min_distance")
     goal_max_distance: float = env_field("goal_max_distance")
     curriculum_levels: int = field(ENV, 0, ENV_FIELDS["curriculum_levels"].metadata["help"])  # training only
+    command_vx: list = env_field("command_vx")
+    command_vy: list = env_field("command_vy")
+    command_yaw_rate: list = env_field("command_yaw_rate")
+    command_interval: float = env_field("command_interval")
+    command_zero_share: float = env_field("command_zero_share")
+    command_heading_share: float = env_field("command_heading_share")
     leg_failure: str = env_field("leg_failure")
     leg_failure_rate: float = env_field("leg_failure_rate")
     leg_failure_weights: list = env_field("leg_failure_weights")

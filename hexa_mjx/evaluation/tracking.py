@@ -1,0 +1,199 @@
+"""How well a policy follows velocity commands, from a batch of recorded episodes (NumPy only).
+
+Inputs per control step (time first, then episodes): the command in force (`command`, the model's
+userdata), the (vx, vy, yaw rate) it asks for (`commanded`), the torso's measured (vx, vy, yaw
+rate) after the step (`velocity`), `alive`, foot stance, servo power and qpos.
+
+Definitions (docs/EVALUATION.md):
+- Steps within SETTLE_S of a command change (or of the episode's start) are left out: the robot
+  is still changing speed.
+- The measured velocity is averaged over the last AVERAGE_S (about one stride), since a walking
+  torso sways within every stride; the instantaneous error is reported beside it.
+- Each command's class is exact (hexa_mjx.tasks.velocity.CLASSES): the draw sets the other
+  components to zero. Commands in heading mode are their own class, "heading".
+- Tracking share: the measured velocity projected on the command, over the command's size (sums
+  over the class's steps); 1 is perfect, below 1 too slow.
+- Drift while commanded to stand: each zero command's net displacement (and turn) after settling,
+  over its time.
+- Speed bands: every settled command whose yaw rate is zero, analysed as one gait window
+  (hexa_mjx.evaluation.gait), grouped by its commanded planar speed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+SETTLE_S = 1.0  # s left out after each command change
+AVERAGE_S = 0.25  # s, the measured velocity's averaging window (a stride at about 4 Hz)
+SPEED_BANDS = (0.0, 0.25, 0.5, 0.75, 1.0, 1.5)  # m/s, commanded planar speed
+
+
+def command_class(command: np.ndarray, classes) -> np.ndarray:
+    """The class index of each command (..., 4) in `classes` (+ "heading" last), by which of its
+    components are nonzero."""
+    vx, vy, wz, mode = (command[..., i] for i in range(4))
+    nx, ny, nw = vx != 0, vy != 0, wz != 0
+    name = np.select([mode > 0.5, ~nx & ~ny & ~nw, nx & ~ny & ~nw & (vx > 0), nx & ~ny & ~nw & (vx < 0),
+                      ~nx & ny & ~nw, ~nx & ~ny & nw, nx & ny & ~nw],
+                     ["heading", "zero", "forward", "backward", "sideways", "turn", "diagonal"], "walk and turn")
+    order = {c: i for i, c in enumerate([*classes, "heading"])}
+    return np.vectorize(order.get)(name)
+
+
+def settled_steps(command: np.ndarray, alive: np.ndarray, dt: float):
+    """(whether each step is at least SETTLE_S past its command's start and alive, segment id of
+    each step within its episode)."""
+    changed = np.concatenate([np.ones((1, command.shape[1]), bool),
+                              np.any(command[1:] != command[:-1], axis=-1)], axis=0)
+    segment = np.cumsum(changed, axis=0) - 1
+    t = np.arange(len(command))[:, None]
+    start = np.maximum.accumulate(np.where(changed, t, 0), axis=0)
+    return (t - start >= round(SETTLE_S / dt)) & (alive > 0), segment
+
+
+def averaged(values: np.ndarray, steps: int) -> np.ndarray:
+    """Each step's mean over the last `steps` steps (fewer at the start), along time."""
+    total = np.cumsum(values, axis=0)
+    out = total.copy()
+    out[steps:] = total[steps:] - total[:-steps]
+    count = np.minimum(np.arange(1, len(values) + 1), steps).reshape(-1, *([1] * (values.ndim - 1)))
+    return out / count
+
+
+def _errors(commanded, velocity, mask) -> dict:
+    """RMS planar-velocity and yaw-rate errors and tracking shares over the `mask`ed steps."""
+    n = int(mask.sum())
+    if n == 0:
+        return {"steps": 0}
+    c, v = commanded[mask], velocity[mask]
+    planar = np.sum((c[:, :2] - v[:, :2]) ** 2, axis=1)
+    cc, cw = np.sum(c[:, :2] ** 2), np.sum(c[:, 2] ** 2)
+    return {"steps": n, "velocity_rms": float(np.sqrt(planar.mean())),
+            "yaw_rate_rms": float(np.sqrt(np.mean((c[:, 2] - v[:, 2]) ** 2))),
+            "velocity_share": float(np.sum(c[:, :2] * v[:, :2]) / cc) if cc > 0 else None,
+            "yaw_rate_share": float(np.sum(c[:, 2] * v[:, 2]) / cw) if cw > 0 else None}
+
+
+def tracking_summary(task, dt: float, traj: dict, alive: np.ndarray, fell) -> tuple[dict, dict]:
+    """eval.py's tracking figures (summary, per-episode) of a velocity task's rollout."""
+    from hexa_mjx.evaluation import gait
+    from hexa_mjx.tasks.velocity import CLASSES
+
+    command, commanded, instant = traj["command"], traj["commanded"], traj["velocity"]
+    settled, segment = settled_steps(command, alive, dt)
+    velocity = averaged(instant, max(1, round(AVERAGE_S / dt)))
+    classes = command_class(command, CLASSES)
+    names = [*CLASSES, "heading"]
+    per_class = {names[i]: _errors(commanded, velocity, settled & (classes == i)) for i in range(len(names))}
+    overall = _errors(commanded, velocity, settled)
+    instant_err = _errors(commanded, instant, settled)
+
+    drift, bands = [], {band: [] for band in range(len(SPEED_BANDS) - 1)}
+    qpos, robot = traj["qpos"], task.robot
+    for i in range(command.shape[1]):
+        for s in np.unique(segment[settled[:, i], i]):
+            steps = np.flatnonzero(settled[:, i] & (segment[:, i] == s))
+            if len(steps) < 2:
+                continue
+            kind, duration = names[classes[steps[0], i]], len(steps) * dt
+            if kind == "zero":
+                xy = qpos[steps, i, :2]
+                turn = np.angle(np.exp(1j * np.diff(_yaw(qpos[steps, i]))).prod())
+                drift.append((np.linalg.norm(xy[-1] - xy[0]) / duration, abs(turn) / duration))
+            elif "stance" in traj and commanded[steps[0], i, 2] == 0 and kind != "heading":
+                speed = float(np.linalg.norm(commanded[steps[0], i, :2]))
+                band = np.searchsorted(SPEED_BANDS, speed, side="right") - 1
+                if 0 <= band < len(bands):
+                    bands[band].append(gait.analyze(traj["stance"][steps, i], traj["power"][steps, i],
+                                                    qpos[steps, i, :2], dt, robot.mass, robot.leg_length))
+    drift = np.array(drift).reshape(-1, 2)
+    summary = {
+        "settle_s": SETTLE_S, "average_s": AVERAGE_S, **{k: v for k, v in overall.items()},
+        "velocity_rms_instant": instant_err.get("velocity_rms"), "yaw_rate_rms_instant": instant_err.get("yaw_rate_rms"),
+        "classes": {name: figures for name, figures in per_class.items() if figures["steps"]},
+        "stand_drift": {"commands": len(drift), "speed_mean": float(drift[:, 0].mean()) if len(drift) else None,
+                        "speed_p95": float(np.percentile(drift[:, 0], 95)) if len(drift) else None,
+                        "yaw_rate_mean": float(drift[:, 1].mean()) if len(drift) else None},
+        "speed_bands": [_band(SPEED_BANDS[b], SPEED_BANDS[b + 1], records) for b, records in bands.items() if records],
+    }
+    per_episode = {"velocity_rms": [_errors(commanded[:, i], velocity[:, i], settled[:, i]).get("velocity_rms")
+                                    for i in range(command.shape[1])]}
+    return summary, per_episode
+
+
+def _yaw(qpos):
+    w, x, y, z = (qpos[:, 3 + i] for i in range(4))
+    return np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+
+
+def _band(lo: float, hi: float, records: list[dict]) -> dict:
+    """One speed band's gait: class shares, mean duty factor, measured speed, cost of transport."""
+    from hexa_mjx.evaluation import gait
+
+    valid = [r for r in records if "duty_factor" in r]
+    cot = np.array([r["cost_of_transport"] for r in valid], float)
+    shares = {c: sum(r["class"] == c for r in records) / len(records) for c in gait.CLASSES}
+    return {"band": [lo, hi], "commands": len(records), "class": max(shares, key=shares.get), "class_shares": shares,
+            "duty_factor": float(np.mean([r["duty_factor"].mean() for r in valid])) if valid else None,
+            "speed": float(np.mean([r["speed"] for r in valid])) if valid else None,
+            "cost_of_transport_median": float(np.nanmedian(cot)) if np.isfinite(cot).any() else None,
+            "points": [(float(r["speed"]), float(r["cost_of_transport"]), r["class"]) for r in valid
+                       if np.isfinite(r["cost_of_transport"])]}
+
+
+def table_rows(summary: dict) -> list[tuple[str, str]]:
+    """eval.py's table rows of the tracking figures."""
+    t = summary["tracking"]
+    pct = lambda x: "-" if x is None else f"{x:.0%}"  # noqa: E731
+    rows = [(f"velocity RMS error ({t['average_s']} s average; instantaneous)",
+             f"{t['velocity_rms']:.3f} m/s ({t['velocity_rms_instant']:.3f})"),
+            ("yaw-rate RMS error (average; instantaneous)", f"{t['yaw_rate_rms']:.3f} rad/s ({t['yaw_rate_rms_instant']:.3f})"),
+            (f"  steps left out after each command change", f"{t['settle_s']} s")]
+    for name, c in t["classes"].items():
+        rows.append((f"  {name}: velocity, yaw rate RMS; tracking share",
+                     f"{c['velocity_rms']:.3f} m/s, {c['yaw_rate_rms']:.3f} rad/s; "
+                     f"{pct(c['velocity_share'])} v, {pct(c['yaw_rate_share'])} yaw"))
+    d = summary["tracking"]["stand_drift"]
+    if d["commands"]:
+        rows.append(("drift commanded to stand: mean (95th pct), yaw",
+                     f"{d['speed_mean']:.3f} ({d['speed_p95']:.3f}) m/s, {d['yaw_rate_mean']:.3f} rad/s"))
+    for b in t["speed_bands"]:
+        cot = "-" if b["cost_of_transport_median"] is None else f"{b['cost_of_transport_median']:.2f}"
+        duty = "-" if b["duty_factor"] is None else f"{b['duty_factor']:.2f}"
+        rows.append((f"  {b['band'][0]:.2f}-{b['band'][1]:.2f} m/s: gait, duty, cost of transport",
+                     f"{b['class']} ({b['commands']} commands), {duty}, {cot}"))
+    return rows
+
+
+def plot_tracking(task, dt: float, traj: dict, out):
+    """Episode 0's commands against the measured velocity, and cost of transport against speed by
+    gait class (the speed bands' points)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    alive = traj["alive"][:, 0] > 0
+    t = np.arange(alive.sum()) * dt
+    velocity = averaged(traj["velocity"], max(1, round(AVERAGE_S / dt)))
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4))
+    for j, (label, color) in enumerate((("vx, m/s", "C0"), ("vy, m/s", "C1"), ("yaw rate, rad/s", "C2"))):
+        axes[0].plot(t, traj["commanded"][alive, 0, j], color=color, ls="--", label=f"{label} commanded")
+        axes[0].plot(t, velocity[alive, 0, j], color=color, label=f"{label} measured")
+    axes[0].set_xlabel("time, s")
+    axes[0].set_title("episode 0: command (dashed) and measured")
+    axes[0].legend(fontsize=7, ncol=2)
+    summary, _ = tracking_summary(task, dt, traj, traj["alive"], None)
+    points = [p for band in summary["speed_bands"] for p in band["points"]]
+    for k, cls in enumerate(sorted({p[2] for p in points})):
+        xs = [p[0] for p in points if p[2] == cls]
+        axes[1].scatter(xs, [p[1] for p in points if p[2] == cls], s=10, color=f"C{k}", label=cls)
+    axes[1].set_xlabel("measured speed, m/s")
+    axes[1].set_ylabel("cost of transport")
+    axes[1].set_title("cost of transport against speed, by gait")
+    if points:
+        axes[1].legend()
+    fig.tight_layout()
+    fig.savefig(out, dpi=100)
+    plt.close(fig)
+    return out

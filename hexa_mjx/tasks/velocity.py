@@ -1,0 +1,180 @@
+"""Velocity commands: walk at a commanded planar velocity and yaw rate, or stand still.
+
+Each episode starts from a heading uniform over 360 degrees. A command (vx, vy, yaw rate), in the
+heading frame (x forward, y left; yaw counter-clockwise), is drawn from the configured ranges
+(EnvConfig.command_vx, command_vy, command_yaw_rate) and held for `command_interval` seconds. Each
+command is of one class (CLASSES): a share `command_zero_share` are exactly zero (stand still), the
+rest are pure forward, backward or sideways walking, turning on the spot, diagonal walking, or all
+three at once in equal shares, each uniform in its ranges. A share
+`command_heading_share` are in heading mode (legged_gym's): a heading to turn to, held in the goal
+marker's orientation, whose yaw-rate command is HEADING_GAIN times the heading error, clipped to the
+yaw-rate range. The command is physics state: the model's userdata holds
+(vx, vy, yaw rate, heading mode).
+
+Reward: the field's tracking terms, exp(-error^2 / TRACKING_SIGMA) for the planar velocity and the
+yaw rate (legged_gym's and Playground's form and weights), plus the report's contact-aware shaping.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hexa_mjx.mdp import observations, rewards
+from hexa_mjx.robot.kinematics import namespace, rotate, to_heading_frame, yaw
+from hexa_mjx.tasks.base import Task
+
+TRACKING_SIGMA = 0.25  # (m/s)^2 and (rad/s)^2: exp(-error^2 / sigma), legged_gym's and Playground's width
+HEADING_GAIN = 1.0  # 1/s: heading mode's yaw-rate command per rad of heading error
+# Command classes, drawn in equal shares but for "zero" (command_zero_share): pure forward,
+# backward and sideways walking, turning on the spot, diagonal walking, and all three at once.
+CLASSES = ("zero", "forward", "backward", "sideways", "turn", "diagonal", "walk and turn")
+COMMAND_FIELDS = (("vx", "m/s", "forward velocity, heading frame"), ("vy", "m/s", "leftward velocity, heading frame"),
+                  ("yaw_rate", "rad/s", "yaw rate, counter-clockwise positive"))
+
+
+def planar_velocity(qpos, qvel):
+    """The torso's planar velocity in the heading frame (forward, left), m/s."""
+    return to_heading_frame(qvel[:2], yaw(qpos[3:7]))
+
+
+def yaw_rate(qpos, qvel):
+    """The torso's angular velocity about the world's z axis, rad/s (the free joint's is body-frame)."""
+    return rotate(qvel[3:6], qpos[3:7])[2]
+
+
+def tracking_lin_vel(prev_qpos, qpos, qvel, goal, heading, command):
+    """exp(-|v_cmd - v|^2 / TRACKING_SIGMA) of the planar velocity, heading frame: 1 on the command."""
+    xp = namespace(qpos)
+    error = command[:2] - planar_velocity(qpos, qvel)
+    return xp.exp(-(error @ error) / TRACKING_SIGMA)
+
+
+def tracking_ang_vel(prev_qpos, qpos, qvel, goal, heading, command):
+    """exp(-(w_cmd - w)^2 / TRACKING_SIGMA) of the yaw rate: 1 on the command."""
+    return namespace(qpos).exp(-((command[2] - yaw_rate(qpos, qvel)) ** 2) / TRACKING_SIGMA)
+
+
+class VelocityTask(Task):
+    """Track (vx, vy, yaw rate) commands, resampled on an interval, some of them zero."""
+
+    name = "velocity"
+    gym_id = "hexa_mjx/HexapodVelocity-v0"
+    summary = "follow velocity commands (vx, vy, yaw rate), resampled every few seconds, or stand still"
+    terms = {"tracking_lin_vel": tracking_lin_vel, "tracking_ang_vel": tracking_ang_vel}
+    rewards = {"velocity": {"tracking_lin_vel": 1.0, "tracking_ang_vel": 0.5, **rewards.SHAPING}}
+    gait_window = "alive"
+    uses_command = True
+
+    @property
+    def start_yaw_range(self) -> float:
+        return np.pi
+
+    @property
+    def interval_steps(self) -> int:
+        """Control steps each command holds."""
+        return max(1, round(self.config.command_interval * self.config.ctrl_hz))
+
+    def first_goal(self, qpos, draws, key, level=0):
+        return qpos[:2]  # no goal: the marker stays at the start (the path follower moves it)
+
+    def reached(self, dist, qpos, heading):
+        return namespace(dist).zeros((), bool)  # no goal to reach: eval.py reports tracking instead
+
+    def first_command(self, qpos, draws, key):
+        return self.draw_command(draws, key)
+
+    def next_command(self, t, command, heading, draws, key):
+        return draws.select(t % self.interval_steps == 0, lambda: self.draw_command(draws, key),
+                            lambda: (command, heading))
+
+    def draw_command(self, draws, key):
+        """A command of a class drawn with `command_zero_share` for "zero" and the rest shared
+        equally (CLASSES), in the configured ranges, and its heading (heading mode)."""
+        cfg, xp = self.config, draws.xp
+        k = [draws.fold_in(key, i) for i in range(6)]
+        share = (1.0 - cfg.command_zero_share) / (len(CLASSES) - 1)
+        c = draws.choice(k[0], len(CLASSES), xp.asarray([cfg.command_zero_share] + [share] * (len(CLASSES) - 1)))
+        u = [draws.uniform(k[i + 1], (), 0.0, 1.0) for i in range(3)]
+        (xlo, xhi), (ylo, yhi), (wlo, whi) = cfg.command_vx, cfg.command_vy, cfg.command_yaw_rate
+        full = [lo + ui * (hi - lo) for ui, (lo, hi) in zip(u, (cfg.command_vx, cfg.command_vy, cfg.command_yaw_rate))]
+        is_ = lambda *names: sum((c == CLASSES.index(n)) * 1.0 for n in names)  # noqa: E731
+        vx = (is_("forward") * u[0] * max(xhi, 0.0) + is_("backward") * u[0] * min(xlo, 0.0)
+              + is_("diagonal", "walk and turn") * full[0])
+        vy = is_("sideways", "diagonal", "walk and turn") * full[1]
+        wz = is_("turn", "walk and turn") * full[2]
+        mode = (draws.uniform(k[4], (), 0.0, 1.0) < cfg.command_heading_share) * (1.0 - is_("zero"))
+        heading = draws.uniform(k[5], (), -np.pi, np.pi)
+        return xp.stack([vx, vy, wz * (1.0 - mode), mode]).astype(xp.float32), heading
+
+    def commanded(self, command, qpos, heading):
+        """The (vx, vy, yaw rate) the policy is asked for: in heading mode the yaw rate turns the
+        torso toward the commanded heading."""
+        xp = namespace(qpos)
+        diff = heading - yaw(qpos[3:7])
+        turn = xp.clip(HEADING_GAIN * xp.arctan2(xp.sin(diff), xp.cos(diff)), *self.config.command_yaw_rate)
+        return xp.stack([command[0], command[1], xp.where(command[3] > 0.5, turn, command[2])])
+
+    @staticmethod
+    def measured(qpos, qvel):
+        """The torso's (vx, vy, yaw rate) in the command's frame and units."""
+        xp = namespace(qpos)
+        return xp.concatenate([planar_velocity(qpos, qvel), yaw_rate(qpos, qvel)[None]])
+
+    def reward_terms(self, names, prev_qpos, qpos, qvel, goal, heading, command) -> dict:
+        return super().reward_terms(names, prev_qpos, qpos, qvel, goal, heading,
+                                    self.commanded(command, qpos, heading))
+
+    def observe(self, qpos, qvel, ctrl, goal, heading, command):
+        xp = namespace(qpos)
+        return xp.concatenate([self.commanded(command, qpos, heading).astype(qpos.dtype), qpos[2:3],
+                               observations.proprioception(qpos, qvel, ctrl, self.robot.ctrl_lo, self.robot.ctrl_hi)])
+
+    @classmethod
+    def layout(cls, joints):
+        return observations.slices([
+            ("command (vx, vy, yaw rate), heading frame", "m/s, m/s, rad/s", 3), ("torso height", "m", 1),
+            *observations.proprioception_slices(joints)])
+
+    def command_fields(self) -> list[dict]:
+        """The command's fields, units and trained ranges (the ONNX metadata's "command")."""
+        cfg = self.config
+        return [{"name": name, "units": units, "what": what, "range": list(bounds), "observation_index": i}
+                for i, ((name, units, what), bounds) in
+                enumerate(zip(COMMAND_FIELDS, (cfg.command_vx, cfg.command_vy, cfg.command_yaw_rate)))]
+
+    @property
+    def command_ranges(self) -> tuple:
+        """((min, max) of vx, vy, yaw rate): what commands from outside are clipped to."""
+        return self.config.command_vx, self.config.command_vy, self.config.command_yaw_rate
+
+    def evaluation_settings(self) -> dict:
+        cfg = self.config
+        return {"command_vx": list(cfg.command_vx), "command_vy": list(cfg.command_vy),
+                "command_yaw_rate": list(cfg.command_yaw_rate), "command_interval": cfg.command_interval,
+                "command_zero_share": cfg.command_zero_share}
+
+    # -- figures --------------------------------------------------------------
+
+    @classmethod
+    def progress_figure(cls, row: dict) -> str:
+        scales, steps = cls.rewards["velocity"], row.get("episode_length") or np.nan
+        lin = row.get("eval/episode_reward/tracking_lin_vel", np.nan) / scales["tracking_lin_vel"] / steps
+        ang = row.get("eval/episode_reward/tracking_ang_vel", np.nan) / scales["tracking_ang_vel"] / steps
+        return f"tracking v {lin:.2f} yaw {ang:.2f}"
+
+    def evaluation(self, env, start_qpos, traj, alive, fell):
+        from hexa_mjx.evaluation import tracking  # evaluation-only figures
+
+        summary, per_episode = tracking.tracking_summary(self, env.dt, traj, alive, fell)
+        return {"tracking": summary}, {"tracking": per_episode}
+
+    @classmethod
+    def table_rows(cls, summary: dict) -> list[tuple[str, str]]:
+        from hexa_mjx.evaluation import tracking
+
+        return tracking.table_rows(summary)
+
+    def plot(self, env, start_qpos, traj, out):
+        from hexa_mjx.evaluation import tracking
+
+        return tracking.plot_tracking(self, env.dt, traj, out / "tracking.png")

@@ -1,0 +1,176 @@
+"""The velocity task: commands drawn, held and resampled as configured, tracked in the field's
+reward form, observed alike by both engines; eval.py's tracking figures; schedules, keyboard and the
+path follower that drive a velocity policy outside the trainer."""
+
+import json
+
+import jax
+import jax.numpy as jp
+import mujoco
+import numpy as np
+import pytest
+
+import hexa_mjx
+from hexa_mjx.deploy import commands
+from hexa_mjx.engines.mjx_env import DRAWS
+from hexa_mjx.engines.native import NativeEnv
+from hexa_mjx.evaluation import tracking
+from hexa_mjx.evaluation.nav_metrics import segment_distance
+from hexa_mjx.mdp.config import make_config
+from hexa_mjx.robot.kinematics import yaw
+from hexa_mjx.tasks import velocity
+
+INTERVAL_STEPS = 3
+
+
+@pytest.fixture(scope="module")
+def vel_env():
+    return hexa_mjx.make_env(task="velocity", episode_length=20, command_interval=INTERVAL_STEPS / 60.0,
+                             command_heading_share=0.2)
+
+
+@pytest.fixture(scope="module")
+def vel_states(vel_env):
+    return jax.jit(jax.vmap(vel_env.reset))(jax.random.split(jax.random.PRNGKey(0), 64))
+
+
+def test_commands_fall_in_their_classes_and_ranges(vel_env):
+    keys = jax.random.split(jax.random.PRNGKey(1), 4000)
+    cmd = np.asarray(jax.jit(jax.vmap(lambda k: vel_env.task.draw_command(DRAWS, k)[0]))(keys))
+    cfg = vel_env.config
+    for i, bounds in enumerate((cfg.command_vx, cfg.command_vy, cfg.command_yaw_rate)):
+        assert bounds[0] <= cmd[:, i].min() and cmd[:, i].max() <= bounds[1]
+    names = [*velocity.CLASSES, "heading"]
+    classes = tracking.command_class(cmd, velocity.CLASSES)
+    shares = {name: float(np.mean(classes == i)) for i, name in enumerate(names)}
+    assert shares["zero"] == pytest.approx(cfg.command_zero_share, abs=0.02)
+    assert shares["heading"] == pytest.approx(0.2 * (1 - cfg.command_zero_share), abs=0.03)
+    for name in ("forward", "backward", "sideways", "turn", "diagonal", "walk and turn"):
+        assert shares[name] == pytest.approx(0.8 * 0.9 / 6, abs=0.02), name
+    forward = cmd[classes == names.index("forward")]
+    assert np.all(forward[:, 0] > 0) and np.all(forward[:, 1:3] == 0)
+
+
+def test_commands_hold_for_the_interval_and_then_change(vel_env, vel_states):
+    state = jax.tree.map(lambda x: x[:8], vel_states)
+    step = jax.jit(jax.vmap(vel_env.step))
+    seen = [np.asarray(state.pipeline_state.userdata)]
+    for _ in range(2 * INTERVAL_STEPS):
+        state = step(state, jp.zeros((8, vel_env.action_size)))
+        seen.append(np.asarray(state.pipeline_state.userdata))
+    changed = [bool(np.any(a != b)) for a, b in zip(seen[:-1], seen[1:])]
+    # A new command after steps 3 and 6, none between (8 environments: one changes at least).
+    assert changed == [False, False, True, False, False, True]
+
+
+def test_tracking_reward_is_one_on_the_command_and_heading_mode_turns_toward_the_heading(vel_env, vel_states):
+    qpos = np.asarray(vel_states.pipeline_state.qpos[0])
+    heading = yaw(qpos[3:7])
+    command = np.array([0.4, -0.2, 0.7], np.float32)
+    qvel = np.zeros(vel_env.mj_model.nv, np.float32)
+    c, s = np.cos(heading), np.sin(heading)
+    qvel[:2] = [c * 0.4 + s * 0.2, s * 0.4 - c * 0.2]  # (0.4, -0.2) in the heading frame
+    assert float(velocity.tracking_lin_vel(None, qpos, qvel, None, None, command)) == pytest.approx(1.0, abs=1e-5)
+    assert float(velocity.tracking_ang_vel(None, qpos, qvel, None, None, command)) == pytest.approx(
+        np.exp(-0.49 / velocity.TRACKING_SIGMA), rel=1e-4)
+    in_heading_mode = np.array([0.0, 0.0, 0.0, 1.0])
+    asked = vel_env.task.commanded(in_heading_mode, qpos, heading + 0.3)
+    assert float(asked[2]) == pytest.approx(velocity.HEADING_GAIN * 0.3, abs=1e-5)
+    far = vel_env.task.commanded(in_heading_mode, qpos, heading + 3.0)
+    assert float(far[2]) == pytest.approx(vel_env.config.command_yaw_rate[1])
+
+
+def test_native_engine_observes_and_tracks_what_mjx_does(vel_env, vel_states):
+    state = jax.tree.map(lambda x: x[5], vel_states)
+    native = NativeEnv(vel_env.config)
+    native.reset(seed=0)
+    d = native.data
+    for name in ("qpos", "qvel", "ctrl", "mocap_pos", "mocap_quat", "userdata"):
+        getattr(d, name)[:] = np.asarray(getattr(state.pipeline_state, name))
+    mujoco.mj_forward(native.mj_model, d)
+    np.testing.assert_allclose(native.observe(), np.asarray(state.obs), atol=1e-5)
+    assert native.observe()[:3] == pytest.approx(np.asarray(vel_env.task.commanded(
+        native.command, native.data.qpos, native.heading)), abs=1e-6)
+    _, reward, _, _, info = native.step(np.zeros(18))
+    assert np.isfinite(reward) and {"tracking_lin_vel", "tracking_ang_vel"} <= set(info["terms"])
+
+
+@pytest.mark.parametrize("settings, message", [
+    ({"command_vx": (1.0, -0.5)}, "command_vx is a range"), ({"command_yaw_rate": (0.0, float("inf"))}, "finite"),
+    ({"command_interval": 0.0}, "command_interval"), ({"command_zero_share": 1.5}, "command_zero_share")])
+def test_bad_command_settings_are_refused_before_anything_is_built(settings, message):
+    with pytest.raises(ValueError, match=message):
+        NativeEnv(make_config("velocity", **settings))
+
+
+def test_tracking_figures_of_a_known_rollout():
+    dt, steps = 1 / 60, 240
+    command = np.zeros((steps, 2, 4))
+    command[:120, 0, 0] = 0.5  # forward, then zero
+    command[:, 1, 2] = 1.0  # turning on the spot
+    commanded = command[..., :3].copy()
+    measured = commanded * 0.8  # 80% of every command
+    qpos = np.zeros((steps, 2, 7))
+    qpos[..., 3] = 1.0
+    qpos[120:, 0, 0] = np.arange(120) * dt * 0.05  # drifting at 0.05 m/s while told to stand
+    traj = {"command": command, "commanded": commanded, "velocity": measured, "qpos": qpos}
+    task = type("T", (), {"robot": None})()
+    summary, per_episode = tracking.tracking_summary(task, dt, traj, np.ones((steps, 2)), None)
+    assert summary["classes"]["forward"]["velocity_rms"] == pytest.approx(0.1, abs=1e-6)
+    assert summary["classes"]["forward"]["velocity_share"] == pytest.approx(0.8)
+    assert summary["classes"]["turn"]["yaw_rate_rms"] == pytest.approx(0.2, abs=1e-6)
+    # Each change's first second is left out: 60 of the forward command's 120 steps count.
+    assert summary["classes"]["forward"]["steps"] == 120 - 60
+    assert summary["stand_drift"]["speed_mean"] == pytest.approx(0.05, rel=0.03)
+
+
+def test_schedules_are_read_from_csv_and_json_and_bad_ones_refused(tmp_path):
+    csv = tmp_path / "drive.csv"
+    csv.write_text("t,vx,vy,yaw_rate\n0,0.5,0,0\n2.5,0,0,1.0  # turn\n4,0,0,0\n")
+    table = commands.load_schedule(csv)
+    schedule = commands.Schedule(table)
+    assert list(schedule(1.0)) == [0.5, 0, 0] and list(schedule(3.0)) == [0, 0, 1.0]
+    js = tmp_path / "drive.json"
+    js.write_text(json.dumps([{"t": 0, "vx": 0.5, "vy": 0, "yaw_rate": 0}, [2.5, 0, 0, 1.0], [4, 0, 0, 0]]))
+    np.testing.assert_array_equal(commands.load_schedule(js), table)
+    for text, message in [("0,0.5,0\n", "4 values"), ("0,1,0,0\n0,1,0,0\n", "increase"), ("0,x,0,0\n", "cannot be read"),
+                          ("0,nan,0,0\n", "finite")]:
+        csv.write_text(text)
+        with pytest.raises(ValueError, match=message):
+            commands.load_schedule(csv)
+
+
+def test_keyboard_steps_and_stops_within_the_ranges():
+    keys = commands.Keyboard(((-0.5, 1.0), (-0.5, 0.5), (-1.5, 1.5)))
+    for _ in range(20):
+        keys.press(87)  # W
+    keys.press(81)  # Q
+    assert list(keys(0.0)) == [1.0, 0.0, 0.25]
+    keys.press(commands.STOP_KEY)
+    assert not keys(0.0).any() and not keys.press(73)  # I is the goal viewer's, not a driving key
+
+
+def test_path_follower_walks_a_point_robot_around_the_square():
+    """A robot that does exactly what it is commanded follows the 2 m square to its end."""
+    class Point:
+        def __init__(self):
+            self.data = type("D", (), {"qpos": np.array([0.0, 0, 0.12, 1, 0, 0, 0])})()
+
+    robot, dt = Point(), 1 / 60
+    square = np.array([[2.0, 0], [2, 2], [0, 2], [0, 0]])
+    follower = commands.PathFollower(square, ((-0.5, 1.0), (-0.5, 0.5), (-1.5, 1.5)))
+    follower.reset(robot.data.qpos[:2])
+    path = []
+    for step in range(60 * 60):
+        vx, vy, wz = follower(step * dt, robot)
+        h = yaw(robot.data.qpos[3:7])
+        robot.data.qpos[:2] += dt * np.array([np.cos(h) * vx - np.sin(h) * vy, np.sin(h) * vx + np.cos(h) * vy])
+        h += dt * wz
+        robot.data.qpos[3:7] = [np.cos(h / 2), 0, 0, np.sin(h / 2)]
+        path.append(robot.data.qpos[:2].copy())
+    path = np.array(path)
+    assert follower.reached == 4 and np.linalg.norm(path[-1]) < 0.15
+    corners = np.vstack([[0, 0], square])
+    deviation = np.min([segment_distance(path, np.broadcast_to(a, path.shape), np.broadcast_to(b, path.shape))
+                        for a, b in zip(corners[:-1], corners[1:])], axis=0)
+    assert deviation.max() < 0.3  # corners are cut by less than the lookahead
