@@ -106,10 +106,12 @@ def main(argv=None) -> int:
         overrides = cli.env_overrides(args)
         if args.solver == "default":
             overrides.update(solver_iterations=100, ls_iterations=50)  # MuJoCo's defaults
+        velocity = TASKS[policy.metadata["task"]].uses_command
+        if velocity and args.waypoints and not args.follow:
+            raise ValueError("a velocity policy walks waypoints through the path follower: add --follow")
         if args.waypoints and not (TASKS[policy.metadata["task"]].follows_waypoints or args.follow):
             raise ValueError(f"--waypoints need a task that follows a path; this is a {policy.metadata['task']}-task "
                              "policy")
-        velocity = TASKS[policy.metadata["task"]].uses_command
         if (args.commands or args.follow) and not velocity:
             raise ValueError(f"--commands and --follow drive a velocity policy; this is a {policy.metadata['task']}-task "
                              "policy")
@@ -117,8 +119,6 @@ def main(argv=None) -> int:
             raise ValueError('--follow walks a path: give it with --waypoints "x,y x,y ..."')
         if args.commands and args.follow:
             raise ValueError("--commands and --follow both set the commands: choose one")
-        if velocity and args.waypoints and not args.follow:
-            raise ValueError("a velocity policy walks waypoints through the path follower: add --follow")
         if not (0 < args.follow_speed <= 5):
             raise ValueError(f"--follow_speed is a speed in m/s above 0 (at most 5), got {args.follow_speed}")
         schedule = commands.Schedule(commands.load_schedule(args.commands)) if args.commands else None
@@ -154,27 +154,38 @@ def main(argv=None) -> int:
     for i in range(args.episodes):
         source = schedule
         if args.follow:
-            start = env.robot.start_xy
-            source = commands.PathFollower(start + cli_waypoints(args), env.task.command_ranges, speed=args.follow_speed,
-                                           success_radius=env.config.success_radius)
+            source = commands.PathFollower(env.robot.start_xy + cli_waypoints(args), env.task.command_ranges,
+                                           speed=args.follow_speed, success_radius=env.config.success_radius)
         ep = player.run_episode(policy, env, args.seed + i, record=(i == 0 and not args.no_video), source=source)
         episodes.append(ep)
-        print(f"episode {i:3d}: {'success' if ep['success'] else 'no success':10s} final distance "
-              f"{ep['final_distance']:.2f} m  goals {ep['goals_reached']:2d}  {'fell' if ep['fell'] else 'upright'}  "
+        if env.task.has_goal:
+            figure = (f"{'success' if ep['success'] else 'no success':10s} final distance {ep['final_distance']:.2f} m  "
+                      f"goals {ep['goals_reached']:2d}")
+        elif args.follow:
+            figure = f"waypoints reached {ep['waypoints_reached']} of {len(cli_waypoints(args))}"
+        else:
+            rms = ep["velocity_rms"]
+            figure = f"velocity RMS error {'-' if rms is None else format(rms, '.3f')} m/s"
+        print(f"episode {i:3d}: {figure}  {'fell' if ep['fell'] else 'upright'}  "
               f"feet only {ep['feet_only_share']:.0%} of {ep['steps']} steps")
     elapsed = time.perf_counter() - start
     s = player.summarize(episodes)
-    print(f"summary: success {s['success_rate']:.0%}, falls {s['fall_rate']:.0%}, final distance "
-          f"{s['final_distance_mean']:.2f} m, goals/episode {s['goals_per_episode']:.1f}, feet only "
-          f"{s['feet_only_share']:.1%} of steps, speed to the first goal "
-          f"{'-' if s['speed_to_first_goal'] is None else format(s['speed_to_first_goal'], '.3f')} m/s; {sum(e['steps'] for e in episodes) / elapsed:,.0f} control steps/s "
-          f"with the policy (one core)")
+    rate = f"{sum(e['steps'] for e in episodes) / elapsed:,.0f} control steps/s with the policy (one core)"
+    if env.task.has_goal:
+        speed = s["speed_to_first_goal"]
+        print(f"summary: success {s['success_rate']:.0%}, falls {s['fall_rate']:.0%}, final distance "
+              f"{s['final_distance_mean']:.2f} m, goals/episode {s['goals_per_episode']:.1f}, feet only "
+              f"{s['feet_only_share']:.1%} of steps, speed to the first goal "
+              f"{'-' if speed is None else format(speed, '.3f')} m/s; {rate}")
+    else:
+        print(f"summary: falls {s['fall_rate']:.0%}, feet only {s['feet_only_share']:.1%} of steps; {rate}")
     if env.task.uses_command:
         t = player.tracking(env, episodes)
         drift = t["stand_drift"]
-        print(f"tracking ({t['settle_s']} s after each change left out, {t['average_s']} s average): velocity RMS "
-              f"{t.get('velocity_rms', float('nan')):.3f} m/s, yaw rate RMS {t.get('yaw_rate_rms', float('nan')):.3f} "
-              f"rad/s" + (f", drift commanded to stand {drift['speed_mean']:.3f} m/s" if drift["commands"] else ""))
+        if t["steps"]:  # commands held past the settling time (a path follower's change every step)
+                print(f"tracking ({t['settle_s']} s after each change left out, {t['average_s']} s average): velocity "
+                  f"RMS {t['velocity_rms']:.3f} m/s, yaw rate RMS {t['yaw_rate_rms']:.3f} rad/s"
+                  + (f", drift commanded to stand {drift['speed_mean']:.3f} m/s" if drift["commands"] else ""))
         if args.follow:
             done = [e.get("waypoints_reached", 0) == len(cli_waypoints(args)) for e in episodes]
             print(f"path follower: every waypoint reached in {sum(done)} of {len(done)} episodes")
@@ -187,8 +198,9 @@ def main(argv=None) -> int:
         try:
             shown = traj.get("commanded")
             shown = None if shown is None else shown[np.minimum(np.arange(len(traj["qpos"])), len(shown) - 1)]
-            video.render_video(env, traj["qpos"], path, traj["goal"], cli_waypoints(args) if args.follow else
-                               env.config.waypoints, commands=shown)
+            goals = traj["goal"] if env.task.has_goal or args.follow else None  # the follower's waypoint
+            video.render_video(env, traj["qpos"], path, goals, cli.parse_waypoints(args.waypoints) if args.follow
+                               else env.config.waypoints, commands=shown)
         except RuntimeError as e:
             print(f"error: {e}", file=sys.stderr)
             return 2

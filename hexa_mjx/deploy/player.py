@@ -130,6 +130,11 @@ def run_episode(policy: OnnxPolicy, env: NativeEnv, seed: int, record: bool = Fa
               "first_arrival_s": first_arrival, "first_goal_distance": start_goal_dist}
     if hasattr(source, "reached"):
         result["waypoints_reached"] = source.reached
+    if commanding:
+        from hexa_mjx.evaluation.tracking import episode_errors
+
+        errors = episode_errors(*(np.array(track[k]) for k in ("commanded", "velocity", "command")), env.dt)
+        result.update(velocity_rms=errors.get("velocity_rms"), yaw_rate_rms=errors.get("yaw_rate_rms"))
     if record or commanding:
         result["trajectory"] = {"qpos": np.array(qpos), "goal": np.array(goals),
                                 **({k: np.array(v) for k, v in track.items()} if commanding else {})}
@@ -163,7 +168,9 @@ def summarize(episodes: list[dict]) -> dict:
     arrivals = [e["first_arrival_s"] for e in episodes if e["first_arrival_s"] is not None]
     # Speed to the first goal: its start distance over the time to first enter the radius, m/s.
     speeds = [e["first_goal_distance"] / e["first_arrival_s"] for e in episodes if e["first_arrival_s"]]
+    tracked = [e["velocity_rms"] for e in episodes if e.get("velocity_rms") is not None]
     return {"episodes": len(episodes), "success_rate": mean("success"), "fall_rate": mean("fell"),
+            "velocity_rms_mean": float(np.mean(tracked)) if tracked else None,
             "nonfinite_rate": mean("nonfinite"), "final_distance_mean": mean("final_distance"),
             "goals_per_episode": mean("goals_reached"), "feet_only_share": mean("feet_only_share"),
             "first_arrival_s_mean": float(np.mean(arrivals)) if arrivals else None,

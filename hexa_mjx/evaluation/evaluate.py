@@ -244,7 +244,8 @@ def evaluate(ckpt: str | Path, episodes: int = 128, videos: int = 1, out: str | 
             goals = traj["goal"][np.minimum(np.arange(n + 1), n - 1), i]  # each frame: the goal walked to next
             path = out / f"episode_{i}.mp4"
             commands = traj["commanded"][np.minimum(np.arange(n + 1), n - 1), i] if "commanded" in traj else None
-            render_video(env, frames, path, goals, env.config.waypoints, shadows=shadows, commands=commands)
+            render_video(env, frames, path, goals if env.task.has_goal else None, env.config.waypoints,
+                         shadows=shadows, commands=commands)
             result["videos"].append(str(path))
     atomic.write(out / "metrics.json", json.dumps(result, indent=1))
     return result

@@ -7,25 +7,29 @@ from hexa_mjx.evaluation import gait
 
 def format_table(summary: dict, task=None) -> str:
     """The summary as aligned rows; `task` (a hexa_mjx.tasks class) adds its own."""
-    rows = [("episodes", f"{summary['episodes']}"), ("success rate", f"{summary['success_rate']:.1%}"),
-            ("final distance, mean", f"{summary['final_distance_mean']:.3f} m"),
-            ("final distance, median", f"{summary['final_distance_median']:.3f} m"),
-            ("minimum distance, mean", f"{summary['min_distance_mean']:.3f} m"),
-            ("goal bonus, mean", f"{summary['goal_bonus_mean']:.1f}"),
-            ("return, mean +- std", f"{summary['return_mean']:.1f} +- {summary['return_std']:.1f}"),
+    goal = task is None or task.has_goal  # a task without a goal (velocity) has no distance figures
+    rows = [("episodes", f"{summary['episodes']}")]
+    if goal:
+        rows += [("success rate", f"{summary['success_rate']:.1%}"),
+                 ("final distance, mean", f"{summary['final_distance_mean']:.3f} m"),
+                 ("final distance, median", f"{summary['final_distance_median']:.3f} m"),
+                 ("minimum distance, mean", f"{summary['min_distance_mean']:.3f} m"),
+                 ("goal bonus, mean", f"{summary['goal_bonus_mean']:.1f}")]
+    rows += [("return, mean +- std", f"{summary['return_mean']:.1f} +- {summary['return_std']:.1f}"),
             ("fall rate", f"{summary['fall_rate']:.1%}"),
             ("non-finite physics endings", f"{summary['nonfinite_rate']:.1%}"),
             ("mean speed", f"{summary['mean_speed']:.3f} m/s"),
             ("episode length, mean", f"{summary['episode_length_mean']:.0f} steps")]
     steps = summary["steps_to_goal_mean"]
-    rows.append(("steps to the goal, mean of successes", "-" if steps is None else f"{steps:.0f}"))
-    if "body_contact_before_goal_mean" in summary:
+    if goal:
+        rows.append(("steps to the goal, mean of successes", "-" if steps is None else f"{steps:.0f}"))
+    if goal and "body_contact_before_goal_mean" in summary:
         rows.append(("body contact before the goal, mean", f"{summary['body_contact_before_goal_mean']:.1f}"))
-    for phase in ("before_goal", "after_goal"):
+    for phase in ("before_goal", "after_goal") if goal else ("before_goal",):
         if f"contacts_{phase}" in summary:
             counts = summary[f"contacts_{phase}"]
             counts = "-" if counts is None else ", ".join(f"{k} {v:.2f}" for k, v in counts.items())
-            rows.append((f"floor contacts per step, {phase.replace('_', ' ')}", counts))
+            rows.append((f"floor contacts per step, {phase.replace('_', ' ') if goal else 'mean'}", counts))
     if "contact_points_max" in summary:
         cap = summary["contact_cap"]
         kept = (f"physics keeps {cap}; at that cap in {summary['steps_at_contact_cap']:,} of {summary['steps']:,} "

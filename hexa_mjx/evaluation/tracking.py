@@ -74,6 +74,12 @@ def _errors(commanded, velocity, mask) -> dict:
             "yaw_rate_share": float(np.sum(c[:, 2] * v[:, 2]) / cw) if cw > 0 else None}
 
 
+def episode_errors(commanded, velocity, command, dt: float) -> dict:
+    """One episode's RMS errors and tracking shares (arrays with time first, no episode axis)."""
+    settled, _ = settled_steps(command[:, None], np.ones((len(command), 1)), dt)
+    return _errors(commanded, averaged(velocity, max(1, round(AVERAGE_S / dt))), settled[:, 0])
+
+
 def tracking_summary(task, dt: float, traj: dict, alive: np.ndarray, fell) -> tuple[dict, dict]:
     """eval.py's tracking figures (summary, per-episode) of a velocity task's rollout."""
     from hexa_mjx.evaluation import gait

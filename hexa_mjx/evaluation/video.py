@@ -22,7 +22,8 @@ VIDEO_FPS = 30  # frames per second of videos (real time: every ctrl_hz / 30th c
 def render_video(env, qpos_frames: np.ndarray, path: Path, goals: np.ndarray, waypoints=(), width=640,
                  height=480, fps: float = VIDEO_FPS, shadows: bool = False, commands=None) -> int:
     """Render qpos frames (T, nq, one per control step) from the tracking camera into a real-time
-    MP4 of about `fps` frames per second, with the goal marker at each frame's goal (T, 2), the
+    MP4 of about `fps` frames per second, with the goal marker at each frame's goal (T, 2; None:
+    no marker), the
     waypoint path (start -> waypoints) and each frame's velocity command (T, 3; `draw_command`)
     drawn. Returns the number of frames written.
 
@@ -54,9 +55,11 @@ def render_video(env, qpos_frames: np.ndarray, path: Path, goals: np.ndarray, wa
     with atomic.replacing(path) as tmp, imageio.get_writer(tmp, fps=1 / (env.dt * stride), codec="libx264",
                                                             quality=7, macro_block_size=16) as writer:
         commands = [None] * len(qpos_frames) if commands is None else commands
+        if goals is None:  # the marker far below the floor, out of the camera's view
+            goals = np.full((len(qpos_frames), 2), np.nan)
         for qpos, goal, command in zip(qpos_frames[::stride], goals[::stride], commands[::stride]):
             data.qpos[:] = qpos
-            data.mocap_pos[mocap, :2] = goal
+            data.mocap_pos[mocap] = (*qpos[:2], -10.0) if np.isnan(goal[0]) else (*goal, 0.0)
             mujoco.mj_forward(model, data)
             renderer.update_scene(data, camera=robot.TRACKING_CAMERA)
             renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = shadows
@@ -86,8 +89,8 @@ def draw_path(scene, corners: np.ndarray, width=0.01, height=0.003) -> None:
         scene.ngeom += 1
 
 
-ARROW_M_PER_MPS = 0.4  # m of arrow per m/s of commanded velocity
-TURN_M_PER_RADPS = 0.1  # m of the turn arrow per rad/s of commanded yaw rate
+ARROW_M_PER_MPS = 0.5  # m of arrow per m/s of commanded velocity
+TURN_M_PER_RADPS = 0.15  # m of the turn arrow per rad/s of commanded yaw rate
 
 
 def draw_command(scene, qpos: np.ndarray, command) -> None:
@@ -101,17 +104,17 @@ def draw_command(scene, qpos: np.ndarray, command) -> None:
     heading = float(yaw(np.asarray(qpos[3:7])))
     c, s = np.cos(heading), np.sin(heading)
     world = lambda v: np.array([c * v[0] - s * v[1], s * v[0] + c * v[1], 0.0])  # noqa: E731
-    base = np.array([qpos[0], qpos[1], qpos[2] + 0.12])
+    base = np.array([qpos[0], qpos[1], qpos[2] + 0.15])
     vx, vy, wz = (float(x) for x in command[:3])
     parts = []
     if vx == 0 and vy == 0 and wz == 0:
         parts.append((mujoco.mjtGeom.mjGEOM_SPHERE, base, base, [0.9, 0.1, 0.1, 1.0], 0.025))
     if vx or vy:
-        parts.append((mujoco.mjtGeom.mjGEOM_ARROW, base, base + ARROW_M_PER_MPS * world((vx, vy)), [0.1, 0.3, 0.9, 1], 0.015))
+        parts.append((mujoco.mjtGeom.mjGEOM_ARROW, base, base + ARROW_M_PER_MPS * world((vx, vy)), [0.1, 0.3, 0.9, 1], 0.025))
     if wz:
         front = base + world((0.12, 0.0))
         parts.append((mujoco.mjtGeom.mjGEOM_ARROW, front, front + TURN_M_PER_RADPS * wz * world((0.0, 1.0)),
-                      [0.95, 0.55, 0.1, 1], 0.012))
+                      [0.95, 0.55, 0.1, 1], 0.02))
     for kind, a, b, rgba, width in parts:
         if scene.ngeom >= scene.maxgeom:
             return

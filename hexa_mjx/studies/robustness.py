@@ -162,12 +162,13 @@ def plot(rows: list[dict], name: str, out: Path, title: str = "") -> Path:
 
 def table(rows: list[dict], names: list[str], headers: list[str] | None = None) -> str:
     """Markdown: the point's values (keys `names`, titled `headers`), success, falls, speed to the goal."""
-    lines = [f"| {' | '.join(headers or names)} | success | falls | speed to the goal |",
-             "|" + "---|" * (len(names) + 3)]
+    tracking = any(r.get("velocity_rms_mean") is not None for r in rows)  # a velocity policy
+    last = "velocity RMS error" if tracking else "speed to the goal"
+    lines = [f"| {' | '.join(headers or names)} | success | falls | {last} |", "|" + "---|" * (len(names) + 3)]
     for r in rows:
-        speed = r["speed_to_first_goal"]
+        figure = r["velocity_rms_mean"] if tracking else r["speed_to_first_goal"]
         lines.append(f"| {' | '.join(f'{r[n]:g}' for n in names)} | {r['success_rate']:.0%} | {r['fall_rate']:.0%} | "
-                     f"{'-' if speed is None else f'{speed:.3f} m/s'} |")
+                     f"{'-' if figure is None else f'{figure:.3f} m/s'} |")
     return "\n".join(lines)
 
 

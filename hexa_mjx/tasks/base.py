@@ -32,6 +32,7 @@ class Task:
     uses_heading = False  # whether the goal marker's heading is part of the task
     follows_waypoints = False  # whether EnvConfig.waypoints set its goals
     uses_command = False  # whether the task draws commands (the model's userdata)
+    has_goal = True  # whether the goal is a place to reach (distance and success figures mean something)
 
     def __init__(self, config, robot):
         self.config, self.robot = config, robot

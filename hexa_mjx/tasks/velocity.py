@@ -64,6 +64,7 @@ class VelocityTask(Task):
     rewards = {"velocity": {"tracking_lin_vel": 1.0, "tracking_ang_vel": 0.5, **rewards.SHAPING}}
     gait_window = "alive"
     uses_command = True
+    has_goal = False
 
     @property
     def start_yaw_range(self) -> float:

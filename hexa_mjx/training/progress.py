@@ -117,10 +117,11 @@ class Logger:
         self.tb.flush()
         self.evaluated(step)
         left = max(self.cfg.num_timesteps - step, 0) / rate if math.isfinite(rate) and rate > 0 else math.nan
-        task_figure = task_class(self.cfg.task).progress_figure(row)
+        task = task_class(self.cfg.task)
+        goal = (f"distance {row['final_distance']:.2f} m  success {row['success_rate']:.0%}  " if task.has_goal
+                else "")
         print(f"step {step:>9,}/{self.cfg.num_timesteps:,}  {rate:7.0f} steps/s  left {fmt_time(left)}  "
-              f"return {row['episode_return']:8.1f}  distance {row['final_distance']:.2f} m  "
-              f"success {row['success_rate']:.0%}  {task_figure}  falls {row['fall_rate']:.0%}"
+              f"return {row['episode_return']:8.1f}  {goal}{task.progress_figure(row)}  falls {row['fall_rate']:.0%}"
               + (f"  non-finite {row['nonfinite_rate']:.0%}" if row["nonfinite_rate"] > 0 else "")
               + (f"  curriculum level {row['curriculum/level_mean']:.1f} (top {row['curriculum/top_level_share']:.0%})"
                  if "curriculum/level_mean" in row else ""), flush=True)
