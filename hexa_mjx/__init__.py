@@ -52,6 +52,48 @@ class _MovedFinder:
 sys.meta_path.append(_MovedFinder())
 
 
+class _QuietWarpFinder:
+    """Imports mujoco.mjx's optional GPU backend (`mujoco.mjx.warp`) without the two "Failed to
+    import warp" lines it prints when Warp is absent: hexa_mjx runs MJX's JAX implementation,
+    which needs no Warp, so on a machine without it those lines only look like errors."""
+
+    NAME = "mujoco.mjx.warp"
+    NOISE = ("Failed to import warp:", "Failed to import mujoco_warp:")
+
+    def find_spec(self, fullname, path=None, target=None):
+        import importlib.machinery
+
+        if fullname != self.NAME:
+            return None
+        spec = importlib.machinery.PathFinder.find_spec(fullname, path)
+        if spec is not None and spec.loader is not None:
+            spec.loader = _QuietLoader(spec.loader, self.NOISE)
+        return spec
+
+
+class _QuietLoader:
+    def __init__(self, loader, noise):
+        self.loader, self.noise = loader, noise
+
+    def create_module(self, spec):
+        return self.loader.create_module(spec)
+
+    def exec_module(self, module):
+        import contextlib
+        import io
+
+        out = io.StringIO()
+        try:
+            with contextlib.redirect_stdout(out):
+                self.loader.exec_module(module)
+        finally:  # anything else it printed still reaches the console
+            sys.stdout.write("".join(line for line in out.getvalue().splitlines(keepends=True)
+                                     if not line.startswith(self.noise)))
+
+
+sys.meta_path.insert(0, _QuietWarpFinder())
+
+
 def __getattr__(name):
     # Loaded on first use, so that the native-MuJoCo player (hexa_mjx.engines.native) runs without JAX.
     if name == "HexapodEnv":

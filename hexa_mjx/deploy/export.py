@@ -82,7 +82,7 @@ def onnx_model(arrays: dict, metadata: dict):
 
 
 def deployment_metadata(env, cfg, step: int, source: str) -> dict:
-    """What a deployer needs to run the policy: see the README, "Export and play"."""
+    """What a deployer needs to run the policy: docs/DEPLOYMENT.md, "Export"."""
     model = env.mj_model
     env_config = dataclasses.asdict(env.config)
     env_config.pop("model_path")

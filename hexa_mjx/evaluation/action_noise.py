@@ -4,7 +4,7 @@
 
 The actor's std is one learned parameter per joint, independent of the state (CleanRL's actor,
 hexa_mjx.training.loop.network_factory); it starts at --init_noise_std and PPO moves it. Evaluation
-uses the mean action, but training rolls out with this noise (docs/RESULTS.md, session 18).
+uses the mean action, but training rolls out with this noise (docs/RESULTS.md, "The fast preset's finish").
 """
 
 from __future__ import annotations

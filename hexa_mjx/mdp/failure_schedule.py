@@ -12,7 +12,7 @@ Two training-only settings of `--leg_failure random` (evaluation always draws as
   over the legs; the rest go to each leg in proportion to max(deficit, FLOOR) ** 2: twice the
   deficit, four times the practice. The uniform share keeps every leg in practice, as prioritized
   replay keeps a floor: a deficit-only draw starved the legs a gait did not use yet and spent most
-  of the practice on legs it could not yet learn to lose (docs/RESULTS.md, session 15). In the
+  of the practice on legs it could not yet learn to lose (docs/RESULTS.md, "One run with a failure schedule"). In the
   navigation task goals per episode measure both speed and falls (a fall ends the episode); in the
   report's task, with one goal, they are the success rate.
 

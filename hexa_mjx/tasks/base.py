@@ -23,7 +23,7 @@ class Task:
 
     name = ""  # the key in hexa_mjx.tasks.TASKS
     gym_id = ""  # its Gymnasium id, "hexa_mjx/...-v0"
-    summary = ""  # one line for --help and the README's table
+    summary = ""  # one line for --help and the tasks table
     # Reward variants: name -> scales table of hexa_mjx.mdp.rewards terms (and the task's own
     # `terms`); the first is the task's default.
     rewards: dict[str, dict[str, float]] = {}

@@ -4,7 +4,7 @@ Each episode starts from a heading uniform over 360 degrees and asks for another
 way, shown as the goal marker's orientation. The observation is in the heading frame, as the
 navigation task's: where the spot is, how far the torso is turned from the asked heading, and the
 proprioception. Success: at some step within `success_radius` of the spot and within
-HEADING_TOLERANCE of the heading. The module is also the example of how to add a task (README).
+HEADING_TOLERANCE of the heading. The module is also the example of how to add a task (docs/TASKS.md).
 """
 
 from __future__ import annotations
