@@ -174,3 +174,71 @@ def test_path_follower_walks_a_point_robot_around_the_square():
     deviation = np.min([segment_distance(path, np.broadcast_to(a, path.shape), np.broadcast_to(b, path.shape))
                         for a, b in zip(corners[:-1], corners[1:])], axis=0)
     assert deviation.max() < 0.3  # corners are cut by less than the lookahead
+
+
+@pytest.fixture(scope="module")
+def velocity_onnx(tmp_path_factory):
+    """An untrained velocity-task run, evaluated and exported: enough to drive from play.py."""
+    import dataclasses
+
+    from hexa_mjx.deploy import export
+    from hexa_mjx.training import checkpoints, config, loop as training
+
+    run_dir = tmp_path_factory.mktemp("velocity") / "run"
+    cfg = config.validate(config.parse_args(["--task", "velocity", "--hidden", "8", "8", "--episode_length", "90",
+                                             "--num_envs", "8", "--batch_size", "8", "--num_minibatches", "1",
+                                             "--cpu_devices", "1", "--run_dir", str(run_dir)]))
+    (run_dir / "config.json").write_text(json.dumps(dataclasses.asdict(cfg)))
+    checkpoints.save_checkpoint(run_dir, 0, training.init_params(cfg, config.make_env_for(cfg)))
+    return run_dir, export.export(run_dir, run_dir.parent / "velocity.onnx")
+
+
+def test_eval_reports_tracking_and_export_names_the_command(velocity_onnx, tmp_path):
+    from hexa_mjx.evaluation import evaluate, table
+    from hexa_mjx.tasks import TASKS
+
+    run_dir, onnx = velocity_onnx
+    result = evaluate.evaluate(run_dir, episodes=2, video=False, out=tmp_path / "eval")
+    t = result["summary"]["tracking"]
+    assert t["settle_s"] == tracking.SETTLE_S and np.isfinite(t["velocity_rms"]) and t["classes"]
+    text = table.format_table(result["summary"], TASKS["velocity"])
+    assert "velocity RMS error" in text and "final distance" not in text
+    meta = json.loads(onnx.with_suffix(".json").read_text())
+    assert [f["name"] for f in meta["command"]] == ["vx", "vy", "yaw_rate"]
+    assert meta["command"][0]["units"] == "m/s" and meta["command"][2]["range"] == [-1.5, 1.5]
+    assert meta["observation_layout"][0]["what"].startswith("command")
+
+
+def run_play(*args):
+    import subprocess
+    import sys
+
+    from hexa_mjx.robot import constants as robot
+
+    return subprocess.run([sys.executable, str(robot.REPO_ROOT / "play.py"), *map(str, args)], capture_output=True,
+                          text=True, cwd=robot.REPO_ROOT)
+
+
+def test_play_drives_a_velocity_policy_from_a_schedule_and_along_a_path(velocity_onnx, tmp_path):
+    _, onnx = velocity_onnx
+    schedule = tmp_path / "drive.csv"
+    schedule.write_text("t,vx,vy,yaw_rate\n0,0.3,0,0\n0.5,0,0,0\n")
+    out = tmp_path / "r.json"
+    proc = run_play("--policy", onnx, "--commands", schedule, "--json", out, "--video", tmp_path / "v.mp4")
+    assert proc.returncode == 0 and "velocity RMS" in proc.stdout, proc.stderr
+    assert (tmp_path / "v.mp4").stat().st_size > 0
+    proc = run_play("--policy", onnx, "--follow", "--waypoints", "0.5,0", "--no_video")
+    assert proc.returncode == 0 and "waypoints reached" in proc.stdout, proc.stderr
+
+
+def test_play_refuses_bad_driving_input_before_running(velocity_onnx, tmp_path):
+    _, onnx = velocity_onnx
+    bad = tmp_path / "bad.csv"
+    bad.write_text("0,0.5,0,0\n0,0.5,0,0\n")
+    cases = {(onnx, "--waypoints", "1,0"): "add --follow",
+             (onnx, "--commands", bad): "increase row by row",
+             (onnx, "--follow"): "give it with --waypoints",
+             ("policies/navigate.onnx", "--commands", bad): "drive a velocity policy"}
+    for args, message in cases.items():
+        proc = run_play("--policy", *args, "--no_video")
+        assert proc.returncode == 2 and message in proc.stderr and "Traceback" not in proc.stderr, (args, proc.stderr)
