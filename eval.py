@@ -27,21 +27,23 @@ except ImportError as e:  # a missing package, or a MUJOCO_GL that MuJoCo cannot
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="eval.py", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--ckpt", required=True, help="a run directory (its latest checkpoint) or one checkpoint")
-    parser.add_argument("--episodes", type=int, default=128, help="episodes to run (default: 128)")
-    parser.add_argument("--videos", type=int, default=1, help="episodes to render (default: 1)")
-    parser.add_argument("--no_video", "--no-video", dest="video", action="store_false", help="skip rendering")
-    parser.add_argument("--out", default=None, help="output folder (default: <run dir>/eval)")
-    parser.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
-    parser.add_argument("--task", default=None, choices=sorted(TASKS),
+    what = parser.add_argument_group("what to evaluate", "the policy, its episodes and the task they run")
+    output = parser.add_argument_group("output", "what is written besides the table")
+    what.add_argument("--ckpt", required=True, help="a run directory (its latest checkpoint) or one checkpoint")
+    what.add_argument("--episodes", type=int, default=128, help="episodes to run (default: 128)")
+    output.add_argument("--videos", type=int, default=1, help="episodes to render (default: 1)")
+    output.add_argument("--no_video", "--no-video", dest="video", action="store_false", help="skip rendering")
+    output.add_argument("--out", default=None, help="output folder (default: <run dir>/eval)")
+    what.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
+    what.add_argument("--task", default=None, choices=sorted(TASKS),
                         help="run the policy on this task's goals, seeing its own task's observation (default: its "
                              "own task; e.g. the report's policy on navigation goals, as a baseline)")
-    parser.add_argument("--randomize", action="store_true",
+    what.add_argument("--randomize", action="store_true",
                         help="each episode on its own randomized physics (train.py --randomize's ranges)")
     cli.add_env_flags(parser)
-    parser.add_argument("--shadows", action="store_true",
+    output.add_argument("--shadows", action="store_true",
                         help="render shadows and the skybox (5x slower without a GPU)")
-    parser.add_argument("--no_compile_cache", dest="compile_cache", action="store_false",
+    parser.add_argument_group("run", "compiling").add_argument("--no_compile_cache", dest="compile_cache", action="store_false",
                         help="don't keep compiled programs in the per-user cache folder")
     args = parser.parse_args(cli.signed_values(sys.argv[1:] if argv is None else list(argv)))
     jax_setup.prepare_jax(compile_cache=args.compile_cache)

@@ -33,28 +33,31 @@ except ImportError as e:  # a MUJOCO_GL that MuJoCo cannot use
 
 def parse_args(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--policy", required=True, help="exported .onnx file, run directory or checkpoint folder")
-    p.add_argument("--episodes", type=int, default=1, help="episodes to run (each from its own seeded start)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the first episode's start and goals")
-    p.add_argument("--json", default="", help="write per-episode results and a summary to this file")
-    p.add_argument("--video", default="", help="MP4 of the first episode (default play-<policy name>.mp4)")
-    p.add_argument("--no_video", "--no-video", action="store_true", help="write no video")
-    p.add_argument("--viewer", action="store_true", help="open MuJoCo's interactive viewer (needs a display)")
-    p.add_argument("--model", default=None, help="MJCF model (default: the project's models/hexapod.xml)")
-    p.add_argument("--randomize", action="store_true", help="a randomized physics model every episode (friction, "
+    what = p.add_argument_group("what to run", "the policy, its episodes and the physics")
+    output = p.add_argument_group("output", "results, video, the viewer")
+    what.add_argument("--policy", required=True, help="exported .onnx file, run directory or checkpoint folder")
+    what.add_argument("--episodes", type=int, default=1, help="episodes to run (each from its own seeded start)")
+    what.add_argument("--seed", type=int, default=0, help="seed of the first episode's start and goals")
+    output.add_argument("--json", default="", help="write per-episode results and a summary to this file")
+    output.add_argument("--video", default="", help="MP4 of the first episode (default play-<policy name>.mp4)")
+    output.add_argument("--no_video", "--no-video", action="store_true", help="write no video")
+    output.add_argument("--viewer", action="store_true", help="open MuJoCo's interactive viewer (needs a display)")
+    what.add_argument("--model", default=None, help="MJCF model (default: the project's models/hexapod.xml)")
+    what.add_argument("--randomize", action="store_true", help="a randomized physics model every episode (friction, "
                    "masses, payload, servo gains and limits, damping, armature: hexa_mjx.mdp.randomization.Ranges)")
     cli.add_env_flags(p, unset="the policy's own")
-    drive = p.add_argument_group("driving a velocity policy")
+    drive = p.add_argument_group("driving a velocity policy", "where a velocity-task policy's commands come from "
+                                 "(default: the task's own random commands)")
     drive.add_argument("--commands", default="", help="a schedule of (t, vx, vy, yaw_rate) rows, CSV or JSON "
                        "(hexa_mjx.deploy.commands; docs/DEPLOYMENT.md), instead of the task's random commands")
     drive.add_argument("--follow", action="store_true", help="walk --waypoints with the path follower, which turns "
                        "the path into velocity commands (pure pursuit)")
     drive.add_argument("--follow_speed", type=float, default=0.5, help="m/s, the path follower's cruising speed "
                        "(default: 0.5)")
-    p.add_argument("--solver", default="trained", choices=["trained", "default"],
+    what.add_argument("--solver", default="trained", choices=["trained", "default"],
                    help="'trained': the model's fast solver setting (1 iteration); 'default': MuJoCo's default "
                         "accuracy (100 iterations, 50 line-search), the sim-to-sim check")
-    p.add_argument("--benchmark", action="store_true", help="time the policy alone (one observation per call, "
+    output.add_argument("--benchmark", action="store_true", help="time the policy alone (one observation per call, "
                    "one thread) and exit")
     args = p.parse_args(cli.signed_values(sys.argv[1:] if argv is None else list(argv)))
     if args.episodes < 1:

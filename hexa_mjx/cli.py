@@ -17,18 +17,23 @@ from hexa_mjx.mdp.config import EnvConfig
 ENV_FLAGS = ("episode_length", "goal_distance", "goal_min_distance", "goal_max_distance", "waypoints",
              "start_joint_noise", "start_yaw_noise", "max_contact_points", "push_speed", "push_interval",
              "action_latency", "obs_noise", "disabled_legs", "leg_failure", "failure_mode", "terrain", "terrain_seed",
-             "terrain_difficulty")
+             "terrain_difficulty", "command_vx", "command_vy", "command_yaw_rate", "command_interval",
+             "command_zero_share", "command_heading_share")
 TYPES = {"int": int, "float": float, "str": str, "tuple": str}
 
 
 def add_env_flags(parser, names=ENV_FLAGS, unset: str = "the run's own") -> None:
     """One flag per EnvConfig setting in `names`, with its help and choices (default None: `unset`)."""
     fields = {f.name: f for f in dataclasses.fields(EnvConfig)}
-    group = parser.add_argument_group("task and environment")
+    group = parser.add_argument_group("task and environment", "change the world the policy runs in; unset, each "
+                                      "setting keeps the policy's own")
     for name in names:
         meta = dict(fields[name].metadata)
         kind = meta.pop("type", None) or TYPES[fields[name].type]
-        meta.pop("nargs", None)
+        if fields[name].type == "tuple" and "nargs" in meta:  # a range MIN MAX keeps its two values
+            meta["metavar"] = ("MIN", "MAX")
+        else:
+            meta.pop("nargs", None)
         group.add_argument(f"--{name}", type=kind, default=None, **{**meta, "help": f"{meta['help']} (default: {unset})"})
 
 
@@ -41,6 +46,8 @@ def env_overrides(args, names=ENV_FLAGS) -> dict:
             continue
         if name == "waypoints":
             value = tuple(parse_waypoints(value))
+        elif isinstance(value, list):
+            value = tuple(value)
         elif name == "disabled_legs":
             value = parse_legs(value)
             out["leg_failure"] = "none"

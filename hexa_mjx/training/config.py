@@ -23,6 +23,10 @@ from hexa_mjx.training import recipes
 
 ENV, PPO, RUN, SCALE_OUT = "task and environment", "PPO", "run", "scale-out"
 GROUPS = (ENV, PPO, RUN, SCALE_OUT)
+GROUP_HELP = {ENV: "what the robot learns and the world it learns in: the task, its reward, perturbations, terrain",
+              PPO: "the learner: rollout shape, epochs, networks, learning rate, action noise",
+              RUN: "where the run lives and how it reports: run directory, seed, evaluations, resume, checkpoints",
+              SCALE_OUT: "more cores, processes and machines for one run"}
 ENV_FIELDS = {f.name: f for f in dataclasses.fields(EnvConfig)}
 
 
@@ -175,7 +179,7 @@ def build_parser() -> argparse.ArgumentParser:
     """train.py's flags, one per TrainConfig field, in their groups."""
     parser = argparse.ArgumentParser(prog="train.py", description=TrainConfig.__doc__,
                                      argument_default=argparse.SUPPRESS)
-    groups = {name: parser.add_argument_group(name) for name in GROUPS}
+    groups = {name: parser.add_argument_group(name, GROUP_HELP[name]) for name in GROUPS}
     for f in dataclasses.fields(TrainConfig):
         meta = {k: v for k, v in f.metadata.items() if k not in ("group", "env")}
         default = f.default_factory() if f.default_factory is not dataclasses.MISSING else f.default
