@@ -15,6 +15,42 @@ if TYPE_CHECKING:
     from hexa_mjx.training.config import TrainConfig
 
 PROGRESS_INTERVAL_S = 15.0  # at most this long without a console line while training
+RATE_WINDOW = 20  # updates: the ETA's training rate is measured over the latest this many
+
+
+class Eta:
+    """Time left: the steps to go at the recent training rate (the latest RATE_WINDOW updates, no
+    compiling or evaluating in it), plus the evaluations still to come at their measured cost."""
+
+    def __init__(self, total_steps: int, num_evals: int):
+        self.total, self.num_evals = total_steps, num_evals
+        self.updates, self.evaluations = [], []  # (time, step) after each update; s per evaluation
+
+    def update(self, t: float, step: int) -> None:
+        self.updates = (self.updates + [(t, step)])[-RATE_WINDOW - 1:]
+
+    def paused(self) -> None:
+        """Compiling or an evaluation ran: the next update starts a new rate window."""
+        self.updates = []
+
+    def evaluation(self, seconds: float) -> None:
+        self.evaluations.append(seconds)
+
+    @property
+    def rate(self) -> float:
+        """env steps/s over the window (NaN before two updates)."""
+        if len(self.updates) < 2:
+            return math.nan
+        (t0, s0), (t1, s1) = self.updates[0], self.updates[-1]
+        return (s1 - s0) / (t1 - t0) if t1 > t0 else math.nan
+
+    def left(self, step: int) -> float:
+        """s until the run ends (NaN before a rate)."""
+        to_go = max(self.total - step, 0)
+        interval = self.total / max(self.num_evals - 1, 1)
+        evaluations = math.ceil(to_go / interval - 1e-9) if to_go else 0
+        cost = sorted(self.evaluations)[len(self.evaluations) // 2] if self.evaluations else 0.0
+        return to_go / self.rate + evaluations * cost if self.rate > 0 else math.nan
 
 def summarize(metrics: dict) -> dict:
     """The figures a user watches, from brax's eval metrics (per-episode sums, averaged)."""
@@ -68,6 +104,7 @@ class Logger:
         self.last_line_t, self.last_line_step = self.t0, start_step
         self.first_update_s = None
         self.evaluation_t0, self.evaluation_ran = None, False  # when the first evaluation started; whether it ran
+        self.eta, self.this_evaluation_t0 = Eta(cfg.num_timesteps, cfg.num_evals), None
 
     def compiling(self, evaluation_first: bool = True) -> None:
         """Say that the programs are being compiled (or loaded from cache): the evaluation's first
@@ -81,6 +118,7 @@ class Logger:
         """An evaluation starts: the first one compiles its program."""
         if self.evaluation_t0 is None and not self.evaluation_ran:
             self.evaluation_t0 = self.phase_t0 if self.phase == "evaluation" else time.time()
+        self.this_evaluation_t0 = time.time()
 
     def progress(self, step: int, episode_return: Callable[[], float]) -> None:
         """An update has run (`hexa_mjx.training.ppo`): the run is at `step` env steps, and `episode_return()`
@@ -93,11 +131,13 @@ class Logger:
                   f"({now - self.t0:.0f} s since the start)", flush=True)
             self.phase = ""
             self.last_line_t, self.last_line_step = now, step
+            self.eta.update(now, step)
             return
+        self.eta.update(now, step)
         if now - self.last_line_t < self.interval_s or step <= self.last_line_step:
             return
         rate = (step - self.last_line_step) / (now - self.last_line_t)
-        left = max(self.cfg.num_timesteps - step, 0) / rate if rate > 0 else math.nan
+        left = self.eta.left(step)
         print(f"  step {step:>9,}/{self.cfg.num_timesteps:,}  {rate:7.0f} steps/s  left {fmt_time(left)}  "
               f"training episodes' return {episode_return():8.1f}", flush=True)
         self.last_line_t, self.last_line_step = now, step
@@ -116,7 +156,7 @@ class Logger:
                 self.tb.add_scalar(key.replace("eval/episode_", ""), value, step)
         self.tb.flush()
         self.evaluated(step)
-        left = max(self.cfg.num_timesteps - step, 0) / rate if math.isfinite(rate) and rate > 0 else math.nan
+        left = self.eta.left(step)
         task = task_class(self.cfg.task)
         goal = (f"distance {row['final_distance']:.2f} m  success {row['success_rate']:.0%}  " if task.has_goal
                 else "")
@@ -131,6 +171,9 @@ class Logger:
         """An evaluation has run and its row is written; the first one says that the evaluation
         program is ready (and, before training, that the training one is compiling)."""
         now = time.time()
+        if self.this_evaluation_t0 is not None and self.evaluation_ran:  # the first one also compiled
+            self.eta.evaluation(now - self.this_evaluation_t0)
+        self.eta.paused()
         if self.evaluation_t0 is not None:
             before_training = self.phase == "evaluation"
             print(f"evaluation compiled and run in {now - self.evaluation_t0:.0f} s"
