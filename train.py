@@ -7,23 +7,19 @@
 Flags and defaults: `python train.py --help` (hexa_mjx/config.py, TrainConfig).
 """
 
-import signal
 import sys
 
 try:
-    from hexa_mjx.training import config, distributed, jax_setup, loop as training
+    from hexa_mjx.training import config, distributed, jax_setup, loop as training, resume
 except ImportError as e:  # a missing package, or a MUJOCO_GL that MuJoCo cannot use
     print(f"error: {e}", file=sys.stderr)
     sys.exit(2)
 
 
-def _interrupt(signum, frame):
-    raise KeyboardInterrupt
-
-
 def main(argv=None) -> int:
-    # A scheduler's SIGTERM (and Ctrl-C) stop training between programs, keeping the last checkpoint.
-    signal.signal(signal.SIGTERM, _interrupt)
+    # A scheduler's SIGTERM (and Ctrl-C) stop training at the next update, with a checkpoint to
+    # resume from exactly (hexa_mjx.training.resume); a second one stops at once.
+    preemption = resume.Preemption().install()
     cfg = config.parse_args(argv)
     jax_setup.prepare_jax(cfg.cpu_devices, cfg.compile_cache)  # before anything starts JAX
     try:
@@ -42,7 +38,12 @@ def main(argv=None) -> int:
         print(f"error: {error}", file=sys.stderr)
         return 2
     try:
-        training.train(cfg)
+        training.train(cfg, stop=preemption)
+    except resume.Preempted as e:
+        run_dir = e.path.parent.parent if e.path is not None else cfg.run_dir
+        print(f"stopped at step {e.step:,} with a checkpoint; continue exactly with: python train.py --run_dir "
+              f"{run_dir} --resume", file=sys.stderr)
+        return resume.EXIT_CODE
     except KeyboardInterrupt:
         print("\ninterrupted: the last complete checkpoint is kept; continue with --resume", file=sys.stderr)
         return 130

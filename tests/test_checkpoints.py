@@ -30,7 +30,7 @@ def test_a_damaged_checkpoint_is_an_error_and_resume_falls_back(template, tmp_pa
     biggest.write_bytes(bytes(data))
     with pytest.raises(RuntimeError, match="do not match the checksum"):
         checkpoints.load_checkpoint(newest, template)
-    step, params, _ = checkpoints.load_latest(tmp_path, template)
+    step, params, _, _ = checkpoints.load_latest(tmp_path, template)
     assert step == 100 and "falling back to the checkpoint before it" in capsys.readouterr().err
     np.testing.assert_array_equal(jax.tree.leaves(params)[0], jax.tree.leaves(template)[0])
 
@@ -40,7 +40,7 @@ def test_non_finite_parameters_are_refused(template, tmp_path):
     path = checkpoints.save_checkpoint(tmp_path, 100, poisoned)
     with pytest.raises(RuntimeError, match="non-finite"):
         checkpoints.load_checkpoint(path, template)
-    assert checkpoints.load_latest(tmp_path, template) == (0, None, None)
+    assert checkpoints.load_latest(tmp_path, template) == (0, None, None, None)
 
 
 def test_saving_and_loading_print_nothing(template, tmp_path, capfd):
@@ -73,5 +73,5 @@ def test_resume_falls_back_past_a_bad_optimizer_state(template, tmp_path, capsys
     poisoned = jax.tree.map(lambda x: np.asarray(x) * np.nan if np.issubdtype(np.asarray(x).dtype, np.floating)
                             else x, adam_template)
     checkpoints.save_checkpoint(tmp_path, 200, template, poisoned)
-    step, _, adam = checkpoints.load_latest(tmp_path, template, adam_template)
+    step, _, adam, _ = checkpoints.load_latest(tmp_path, template, adam_template)
     assert step == 100 and adam is not None and "non-finite (NaN or inf) optimizer state" in capsys.readouterr().err

@@ -86,3 +86,36 @@ def test_a_restored_adam_continues_as_the_uninterrupted_one():
     jax.tree.map(np.testing.assert_array_equal, resumed, whole)
     fresh, _ = run_adam(half, opt.init(half), 4, 8)  # Adam started afresh on resume
     assert not np.allclose(fresh["w"], whole["w"])
+
+
+# Three updates per evaluation interval, so that a stop can come between evaluations.
+EXACT = ["--num_envs", "8", "--batch_size", "8", "--num_minibatches", "2", "--unroll_length", "4", "--num_evals", "3",
+         "--num_eval_envs", "2", "--episode_length", "20", *NOISE, "--seed", "5", "--num_timesteps", "384"]
+
+
+def comparable(run_dir):
+    """metrics.jsonl rows without their clock figures."""
+    return [{k: v for k, v in row.items() if k not in ("walltime_s", "env_steps_per_s")} for row in metric_rows(run_dir)]
+
+
+def test_kills_and_sigterms_resume_bit_for_bit(tmp_path, cache_env):
+    whole, stopped = tmp_path / "whole", tmp_path / "stopped"
+    run("train.py", *EXACT, "--run_dir", str(whole), env=cache_env)
+
+    proc = run("train.py", *EXACT, "--run_dir", str(stopped), env={**cache_env, faults.VARIABLE: "update-done@2:TERM"},
+               check=False)  # SIGTERM between two evaluations: a checkpoint there
+    assert proc.returncode == 143 and "--resume" in proc.stderr, (proc.returncode, proc.stderr)
+    assert [s for s, _ in checkpoints.list_checkpoints(stopped)] == [128]
+    proc = run("train.py", *EXACT, "--run_dir", str(stopped), "--resume",
+               env={**cache_env, faults.VARIABLE: "row-written@1"}, check=False)  # SIGKILL: the row, no checkpoint
+    assert proc.returncode == -signal.SIGKILL and "exactly" in proc.stdout, proc.stdout
+    proc = run("train.py", *EXACT, "--run_dir", str(stopped), "--resume", env=cache_env)
+    assert "from step 128: exactly" in proc.stdout, proc.stdout
+
+    assert comparable(stopped) == comparable(whole)  # every row, bit for bit
+    cfg = config.load_config(whole)
+    template = training.init_params(cfg, config.make_env_for(cfg))
+    (_, a), (_, b) = (checkpoints.load_checkpoint(checkpoints.list_checkpoints(r)[-1][1], template)
+                      for r in (whole, stopped))
+    for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)):
+        np.testing.assert_array_equal(x, y)  # the final params, bit for bit

@@ -25,7 +25,7 @@ def settings():
 def ours(settings):
     env, ppo_settings, kwargs = settings
     intervals, updates = [], []
-    params = ppo.train(env, ppo_settings, **kwargs, on_interval=lambda step, _, p, adam, env_state: intervals.append((step, p, adam)),
+    params = ppo.train(env, ppo_settings, **kwargs, on_interval=lambda step, _, p, adam, *rest: intervals.append((step, p, adam)),
                        on_update=lambda step, env_state: updates.append((step, env_state.obs.shape)))
     return params, intervals, updates
 
@@ -65,7 +65,7 @@ def test_annealed_learning_rate_reaches_zero_at_the_end(settings, ours):
     env, ppo_settings, kwargs = settings
     intervals = []
     ppo.train(env, ppo_settings, **kwargs, anneal_lr=(256, 256),
-              on_interval=lambda step, _, p, adam, env_state: intervals.append(p))
+              on_interval=lambda step, _, p, adam, *rest: intervals.append(p))
     (norm0, policy0, value0), (norm, policy, value) = intervals[0], intervals[-1]
     jax.tree.map(np.testing.assert_array_equal, (policy, value), (policy0, value0))
     assert not np.array_equal(norm.mean, norm0.mean)

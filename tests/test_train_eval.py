@@ -77,8 +77,8 @@ def test_init_from_fine_tunes_from_another_runs_params(trained, tmp_path, cache_
     cfg = config.load_config(run_dir)
     env = config.make_env_for(cfg)
     template = training.init_params(cfg, env)
-    _, before, _ = checkpoints.load_latest(source, template)
-    _, after, _ = checkpoints.load_latest(run_dir, template)
+    _, before, _, _ = checkpoints.load_latest(source, template)
+    _, after, _, _ = checkpoints.load_latest(run_dir, template)
     # The observation normalizer's sample count (brax's UInt64: hi and lo words) carries on from the
     # source's: a fresh start would count only this run's own samples, as many as the source's.
     count_before, count_after = ((int(p[0].count.hi) << 32) + int(p[0].count.lo) for p in (before, after))

@@ -37,10 +37,13 @@ class RunEvaluator:
     the evaluation environment, wrapped as `ppo.train` wraps its own (`wrap_env_fn`, or brax's
     training wrappers when None; `randomization_fn` drawn per evaluation environment)."""
 
-    def __init__(self, eval_env, wrap_env_fn, randomization_fn, num_eval_envs: int, episode_length: int, seed: int):
+    def __init__(self, eval_env, wrap_env_fn, randomization_fn, num_eval_envs: int, episode_length: int, seed: int,
+                 done: int = 0):
+        """`done`: evaluations this run has already run (an exact resume continues their keys)."""
         from brax import envs
 
         self.key = brax_eval_key(seed, jax.process_index())
+        self.calls = done
         v_randomization = (functools.partial(randomization_fn, rng=jax.random.split(self.key, num_eval_envs))
                            if randomization_fn is not None else None)
         wrap = wrap_env_fn or envs.training.wrap
@@ -52,7 +55,11 @@ class RunEvaluator:
         from brax.training import acting
 
         if self.evaluator is None:
+            key = self.key
+            for _ in range(self.calls):  # brax's evaluator splits its key once per evaluation
+                key = jax.random.split(key)[0]
             self.evaluator = acting.Evaluator(self.env, functools.partial(make_policy, deterministic=True),
                                               num_eval_envs=self.num_eval_envs, episode_length=self.episode_length,
-                                              action_repeat=1, key=self.key)
+                                              action_repeat=1, key=key)
+        self.calls += 1
         return self.evaluator.run_evaluation(fresh_copy(params), training_metrics={})

@@ -2,7 +2,8 @@
 
 `<run>/checkpoints/<step:012d>/` holds `params/` (orbax), `optimizer.npz` (Adam's moments and
 step count as brax's PPO left them, in `jax.tree.leaves` order; see `hexa_mjx.training.optimizer_state`)
-and `step.json` (the step and a SHA-256 of each). Each is written to a temporary folder and
+`resume.npz` (the keys and the training environments' state, for an exact resume) and
+`step.json` (the step and a SHA-256 of each). Each is written to a temporary folder and
 renamed when complete, so a crash leaves the last complete one readable. Loading checks the
 digests and that every value is finite; `load_latest` falls back to the newest checkpoint that
 passes, and says so. Checkpoints from before the optimizer state was saved load as before.
@@ -26,6 +27,7 @@ import numpy as np
 from hexa_mjx.training import crash_points as faults
 
 OPTIMIZER_FILE = "optimizer.npz"
+RESUME_FILE = "resume.npz"  # keys and environment state for an exact resume (hexa_mjx.training.resume)
 
 
 def checkpoint_dir(run_dir: Path) -> Path:
@@ -51,9 +53,9 @@ def remove_temporaries(run_dir: Path) -> int:
     return len(stale)
 
 
-def save_checkpoint(run_dir: Path, step: int, params, optimizer=None) -> Path:
-    """Write params (and the optimizer state, if given) for `step` atomically: into a temporary
-    folder, renamed when complete."""
+def save_checkpoint(run_dir: Path, step: int, params, optimizer=None, resume: tuple[dict, dict] | None = None) -> Path:
+    """Write params (and the optimizer state, and `resume`'s (arrays, facts) for an exact resume,
+    if given) for `step` atomically: into a temporary folder, renamed when complete."""
     root = checkpoint_dir(run_dir)
     root.mkdir(parents=True, exist_ok=True)
     final, tmp = root / f"{step:012d}", root / f"tmp-{step:012d}-{os.getpid()}"
@@ -65,6 +67,10 @@ def save_checkpoint(run_dir: Path, step: int, params, optimizer=None) -> Path:
     if optimizer is not None:
         np.savez(tmp / OPTIMIZER_FILE, *[np.asarray(x) for x in jax.tree.leaves(optimizer)])
         meta["optimizer_sha256"] = digest(tmp / OPTIMIZER_FILE)
+    if resume is not None:
+        arrays, facts = resume
+        np.savez_compressed(tmp / RESUME_FILE, **arrays)
+        meta.update(resume=facts, resume_sha256=digest(tmp / RESUME_FILE))
     faults.point("checkpoint-writing")
     (tmp / "step.json").write_text(json.dumps(meta))
     if final.exists():
@@ -133,7 +139,8 @@ def load_checkpoint(path: Path, template):
     try:
         meta = json.loads((path / "step.json").read_text())
         if "sha256" in meta and digest(path / "params") != meta["sha256"] or (
-                "optimizer_sha256" in meta and digest(path / OPTIMIZER_FILE) != meta["optimizer_sha256"]):
+                "optimizer_sha256" in meta and digest(path / OPTIMIZER_FILE) != meta["optimizer_sha256"]) or (
+                "resume_sha256" in meta and digest(path / RESUME_FILE) != meta["resume_sha256"]):
             raise ValueError("its files do not match the checksum written with them (changed or damaged on disk)")
         params = like(template, checkpointer_here().restore((path / "params").resolve(), host_tree(template)))
     except Exception as e:  # orbax raises many kinds; all mean the same to a user
@@ -162,17 +169,28 @@ def load_optimizer(path: Path, template):
     return jax.tree.unflatten(jax.tree.structure(template), leaves)
 
 
+def load_resume(path: Path) -> tuple[dict, dict] | None:
+    """(arrays, facts) saved for an exact resume with checkpoint `path`, or None for a checkpoint
+    written without them. Call after load_checkpoint, which checks their digest."""
+    file = Path(path) / RESUME_FILE
+    if not file.is_file():
+        return None
+    with np.load(file) as saved:
+        arrays = {name: saved[name] for name in saved.files}
+    return arrays, json.loads((Path(path) / "step.json").read_text())["resume"]
+
+
 def load_latest(run_dir: Path, template, optimizer_template=None):
-    """(step, params, optimizer state) of the newest checkpoint that loads, warning on stderr about
-    each newer one that does not; (0, None, None) when there is none. The optimizer state is None
-    without `optimizer_template`, or for a checkpoint saved without one."""
+    """(step, params, optimizer state, its folder) of the newest checkpoint that loads, warning on
+    stderr about each newer one that does not; (0, None, None, None) when there is none. The
+    optimizer state is None without `optimizer_template`, or for a checkpoint saved without one."""
     for _, path in reversed(list_checkpoints(run_dir)):
         try:
             step, params = load_checkpoint(path, template)
-            return step, params, None if optimizer_template is None else load_optimizer(path, optimizer_template)
+            return step, params, None if optimizer_template is None else load_optimizer(path, optimizer_template), path
         except RuntimeError as e:
             print(f"warning: {e}; falling back to the checkpoint before it", file=sys.stderr)
-    return 0, None, None
+    return 0, None, None, None
 
 
 def resolve_checkpoint(path: Path) -> tuple[Path, Path]:

@@ -1,14 +1,16 @@
 """Crash points for reliability tests: kill this process (SIGKILL, as `kill -9` would) at a chosen
 moment of a training run.
 
-    HEXA_MJX_KILL_AT=NAME[@N] python train.py ...
+    HEXA_MJX_KILL_AT=NAME[@N][:TERM] python train.py ...
 
-kills the run the N-th time (default 1st) it reaches the point NAME:
+kills the run the N-th time (default 1st) it reaches the point NAME (with `:TERM`, sends it
+SIGTERM instead, as a scheduler preempting it would):
 
 - `training-started`: after the step-0 evaluation, before the first checkpoint;
 - `row-written`: an evaluation's row written to metrics.jsonl, its checkpoint not yet saved;
 - `checkpoint-writing`: a checkpoint's files written into its temporary folder, not yet renamed;
-- `checkpoint-saved`: a checkpoint complete (`hexa_mjx.training.loop` writes the evaluation's row first).
+- `checkpoint-saved`: a checkpoint complete (`hexa_mjx.training.loop` writes the evaluation's row first);
+- `update-done`: a PPO update has run (between two evaluations, when there are several per interval).
 
 Unset (the normal case), `point` does nothing but compare a string.
 """
@@ -19,7 +21,7 @@ import os
 import signal
 
 VARIABLE = "HEXA_MJX_KILL_AT"
-POINTS = ("training-started", "row-written", "checkpoint-writing", "checkpoint-saved")
+POINTS = ("training-started", "row-written", "checkpoint-writing", "checkpoint-saved", "update-done")
 _reached: dict[str, int] = {}
 
 
@@ -29,9 +31,10 @@ def point(name: str) -> None:
     wanted = os.environ.get(VARIABLE)
     if not wanted:
         return
+    wanted, _, how = wanted.partition(":")
     target, _, nth = wanted.partition("@")
     if target != name:
         return
     _reached[name] = _reached.get(name, 0) + 1
     if _reached[name] == int(nth or 1):
-        os.kill(os.getpid(), signal.SIGKILL)
+        os.kill(os.getpid(), signal.SIGTERM if how == "TERM" else signal.SIGKILL)

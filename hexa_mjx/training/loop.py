@@ -18,10 +18,10 @@ import jax
 import jax.numpy as jp
 from flax import linen
 
-from hexa_mjx.training import distributed, crash_points as faults, ppo
+from hexa_mjx.training import distributed, crash_points as faults, ppo, resume as exact
 from hexa_mjx.mdp import randomization
-from hexa_mjx.training.checkpoints import (checkpoint_dir, list_checkpoints, load_checkpoint, load_latest, remove_temporaries,
-                                  save_checkpoint)
+from hexa_mjx.training.checkpoints import (checkpoint_dir, list_checkpoints, load_checkpoint, load_latest, load_resume,
+                                           remove_temporaries, save_checkpoint)
 from hexa_mjx.training.config import TrainConfig, init_checkpoint, make_env_for, validate
 from hexa_mjx.mdp.curriculum import level_summary
 from hexa_mjx.mdp.failure_schedule import schedule_summary
@@ -116,30 +116,34 @@ def failure_schedule_for(cfg: TrainConfig, start_step: int) -> dict | None:
     return dict(start_after=-(-after // cfg.num_envs), adaptive=cfg.leg_failure_adaptive)
 
 
-def resume_point(cfg: TrainConfig, run_dir: Path, template, optimizer_template) -> tuple[int, object, object]:
-    """(step, params, Adam state) to continue from: (0, None, None) for a new run, or one with no
-    readable checkpoint; the Adam state is None for a checkpoint saved without it."""
+def resume_point(cfg: TrainConfig, run_dir: Path, template, optimizer_template) -> tuple[int, object, object, dict]:
+    """(step, params, Adam state, exact position) to continue from: (0, None, None, None) for a new
+    run, or one with no readable checkpoint; the Adam state is None for a checkpoint saved without
+    it, the position None where the resume cannot be exact (hexa_mjx.training.resume)."""
     if remove_temporaries(run_dir):
         print(f"removed half-written checkpoint folders in {checkpoint_dir(run_dir)}")
     if not cfg.resume:
-        return 0, None, None
+        return 0, None, None, None
     if not list_checkpoints(run_dir):
         print(f"{run_dir} has no complete checkpoint yet (it stopped before its first): starting again from step 0")
-        return 0, None, None
-    start_step, restore, optimizer = load_latest(run_dir, template, optimizer_template)
+        return 0, None, None, None
+    start_step, restore, optimizer, path = load_latest(run_dir, template, optimizer_template)
     if restore is None:
         print(f"{run_dir} has no readable checkpoint: starting again from step 0")
-        return 0, None, None
+        return 0, None, None, None
+    position, why = exact.exact_resume(load_resume(path), cfg, jax.process_count())
     print(f"resuming {run_dir} from step {start_step:,}"
+          + (": exactly, as if it had not stopped" if position else f", not exactly: {why}")
           + ("" if optimizer is not None else " (its checkpoint has no optimizer state: Adam starts afresh)"))
-    return start_step, restore, optimizer
+    return start_step, restore, optimizer, position
 
 
 # Long by design: the run's steps top to bottom (environment, resume point, logger, PPO, the
 # last evaluation), each a call to a named helper, as a CleanRL script reads.
-def train(cfg: TrainConfig, on_eval=None) -> dict:
+def train(cfg: TrainConfig, on_eval=None, stop=None) -> dict:
     """Run (or resume) PPO for `cfg`; returns the last evaluation row. `on_eval(row)` is called with
-    each evaluation's metrics.jsonl row (a sweep reports them to its scheduler)."""
+    each evaluation's metrics.jsonl row (a sweep reports them to its scheduler). When `stop()` says
+    so (after an update), the run writes a checkpoint and raises `resume.Preempted`."""
     prepare_jax(cpu_devices=cfg.cpu_devices, compile_cache=cfg.compile_cache)
     main = distributed.is_main()  # process 0 (or the only one) reads and writes the run directory
     cfg = validate(cfg, writes=main)
@@ -149,9 +153,9 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
     eval_env = make_env_for(cfg) if cfg.curriculum_levels else env
     template = init_params(cfg, env)
     optimizer_template = adam_template(template)
-    start_step, restore, optimizer, logged = 0, None, None, set()
+    start_step, restore, optimizer, position, logged = 0, None, None, None, set()
     if main:
-        start_step, restore, optimizer = resume_point(cfg, run_dir, template, optimizer_template)
+        start_step, restore, optimizer, position = resume_point(cfg, run_dir, template, optimizer_template)
         if restore is None and cfg.init_from:  # a fine-tuning run's own checkpoints come first on resume
             source_step, restore = load_checkpoint(init_checkpoint(cfg), template)
             print(f"starting from the params of {cfg.init_from} (its step {source_step:,}); Adam starts afresh")
@@ -171,17 +175,25 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
         return {}
 
     logger = Logger(run_dir, cfg, start_step) if main else None
-    schedule = failure_schedule_for(cfg, start_step)
+    # An exact resume runs the whole run's schedule from its saved position, counting steps from
+    # the run's start; any other resume is a new schedule over the steps left, counted from 0.
+    offset = 0 if position else start_step
+    schedule = failure_schedule_for(cfg, offset)
 
     # A fresh run evaluates its untrained params if asked; a resumed one its checkpoint's only if
     # that row is missing (a crash between the two, or a run from before rows were written first).
-    evaluate_start = start_step not in logged and (cfg.eval_at_start or start_step > 0)
+    evaluate_start = start_step not in logged and (cfg.eval_at_start or start_step > 0) and not position
     randomization_fn = randomization.randomization_fn(env) if cfg.randomize else None
     evaluator = RunEvaluator(eval_env, wrap_env_fn(env, cfg.randomize), randomization_fn, cfg.num_eval_envs,
-                             cfg.episode_length, seed=cfg.seed + start_step) if main else None
+                             cfg.episode_length, seed=cfg.seed + offset,
+                             done=position["evaluations"] if position else 0) if main else None
 
-    def on_interval(step, make_policy, params, adam, env_state):  # process 0: before training, after each interval
-        if step == 0 and not evaluate_start:
+    def saved(at):  # what a checkpoint keeps for an exact resume (single-process runs)
+        return exact.saved_position(at, evaluator.calls, cfg) if jax.process_count() == 1 else None
+
+    def on_interval(step, make_policy, params, adam, env_state, at):  # process 0: before training, after each interval
+        first = step == start_step - offset
+        if first and not evaluate_start:
             return
         logger.evaluating()
         metrics = evaluator(make_policy, params)
@@ -190,19 +202,24 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
             metrics.update(level_summary(env_state.info["level"], cfg.curriculum_levels))
         if schedule:
             metrics.update(schedule_summary(env_state.info))
-        logger(start_step + step, metrics)
-        if step == 0:
+        logger(offset + step, metrics)
+        if first:
             faults.point("training-started")
         else:
             # Row first, then checkpoint: a crash between them loses neither, because a resume drops
             # the rows past its checkpoint and trains those steps again.
             faults.point("row-written")
-            save_checkpoint(run_dir, start_step + step, params, adam if cfg.record_optimizer else None)
+            save_checkpoint(run_dir, offset + step, params, adam if cfg.record_optimizer else None, saved(at))
         if on_eval:  # a sweep's scheduler may stop the run here: its checkpoint is saved
             on_eval(logger.last)
 
     def on_update(step, env_state):
-        logger.progress(start_step + step, lambda: mean_last_return(env_state))
+        logger.progress(offset + step, lambda: mean_last_return(env_state))
+        faults.point("update-done")
+
+    def on_stop(step, params, adam, at):  # asked to stop: a checkpoint here, then out
+        path = save_checkpoint(run_dir, offset + step, params, adam, saved(at)) if main else None
+        raise exact.Preempted(offset + step, path)
 
     t0 = time.time()
     devices = devices_for(cfg)
@@ -212,14 +229,15 @@ def train(cfg: TrainConfig, on_eval=None) -> dict:
           f"{cfg.steps_per_update:,} steps per update -> {run_dir}", flush=True)
     if logger:
         logger.compiling(evaluation_first=evaluate_start)
-    ppo.train(env, ppo_settings(cfg, remaining, evals_for(cfg, remaining), cfg.seed + start_step, devices),
-              network_factory(cfg),
+    settings = (ppo_settings(cfg, cfg.num_timesteps, cfg.num_evals, cfg.seed, devices) if position else
+                ppo_settings(cfg, remaining, evals_for(cfg, remaining), cfg.seed + start_step, devices))
+    ppo.train(env, settings, network_factory(cfg),
               # Returns are kept whether or not this process prints them: every process runs one program.
               wrap_env_fn=wrap_env_fn(env, cfg.randomize, track_returns=True, failure_schedule=schedule),
               randomization_fn=randomization_fn, restore_params=restore, restore_adam=optimizer,
-              anneal_lr=(start_step, cfg.num_timesteps) if cfg.anneal_lr else None,
+              anneal_lr=(offset, cfg.num_timesteps) if cfg.anneal_lr else None,
               on_interval=on_interval if main else None,
-              on_update=on_update if main and cfg.progress else None)
+              on_update=on_update if main and cfg.progress else None, resume=position, stop=stop, on_stop=on_stop)
     total = time.time() - t0
     if logger is None:
         print(f"process {jax.process_index()} done: {remaining:,} steps in {total / 60:.1f} min")

@@ -81,9 +81,23 @@ class PPOSettings:
 
 # One function, as brax's ppo.train is: the update's closures share the run's networks, optimizer
 # and keys, and it reads top to bottom as the run goes.
+@dataclasses.dataclass(frozen=True)
+class Position:
+    """Where a run is, with everything its next update depends on besides the training state: the
+    keys and the training environments' state. A run restarted from it continues bit for bit."""
+
+    step: int  # env steps done
+    interval: int  # evaluation intervals done
+    update: int  # updates done within the current interval
+    local_key: object  # the key the next interval's keys are split from
+    key: object  # the current interval's per-device update keys (None between intervals)
+    env_state: object  # the training environments, laid out (devices, environments per device, ...)
+
+
 def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=None, randomization_fn=None,
           restore_params=None, restore_adam=None, anneal_lr: tuple[int, int] | None = None,
-          on_interval: Callable | None = None, on_update: Callable | None = None):
+          on_interval: Callable | None = None, on_update: Callable | None = None, resume: dict | None = None,
+          stop: Callable | None = None, on_stop: Callable | None = None):
     """PPO as brax's `ppo.train` runs it (the same `settings` and `network_factory`), for
     `settings.num_timesteps` env steps in `settings.num_evals - 1` intervals. On process 0,
     `on_interval(step, make_policy, params, adam_state, env_state)` is called before training and
@@ -93,7 +107,11 @@ def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=No
     `restore_adam` (host arrays, `optimizer_state.adam_template`'s structure) continue a run.
     `anneal_lr=(done, total)`: CleanRL's schedule, the learning rate falling linearly from
     `settings.learning_rate` at env step 0 to 0 at `total`, for a run that has `done` steps behind it.
-    Returns the final (normalizer, policy, value) params."""
+    `on_interval`'s sixth argument is the run's `Position`. `resume` (a `Position`'s step,
+    interval, update, keys and the environment state's leaves, as host arrays) continues the same
+    run exactly where that position was; steps are then counted from the run's start. `stop()` is
+    asked after every update; when it says so, `on_stop(step, params, adam_state, position)` is
+    called and training returns early. Returns the final (normalizer, policy, value) params."""
     if not settings.normalize_observations:
         raise ValueError("hexa_mjx's PPO always normalizes observations")
     process_id, process_count = jax.process_index(), jax.process_count()
@@ -120,6 +138,13 @@ def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=No
                                              randomization_fn=randomize)
     key_envs = jax.random.split(key_env, settings.num_envs // process_count)
     env_state = jax.pmap(env.reset, axis_name=AXIS)(key_envs.reshape((len(devices), -1) + key_envs.shape[1:]))
+    if resume is not None:  # the environments as they were: same structure, saved leaves
+        leaves, expected = resume["env_state"], jax.tree.leaves(env_state)
+        if len(leaves) != len(expected) or any(np.shape(a) != b.shape for a, b in zip(leaves, expected)):
+            raise ValueError("the saved environment state does not fit this run's environments")
+        env_state = jax.tree.unflatten(jax.tree.structure(env_state),
+                                       [jp.asarray(a, dtype=b.dtype) for a, b in zip(leaves, expected)])
+        local_key = jp.asarray(resume["local_key"])
 
     obs_shape = env_state.obs.shape[2:]
     network = network_factory(obs_shape, env.action_size, preprocess_observations_fn=running_statistics.normalize)
@@ -155,26 +180,45 @@ def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=No
         state = state.replace(normalizer_params=normalizer, params=ppo_losses.PPONetworkParams(policy, value))
     if restore_adam is not None:
         state = state.replace(optimizer_state=with_adam(state.optimizer_state, restore_adam))
+    step, first_interval, first_update = 0, 0, 0
+    if resume is not None:
+        step, first_interval, first_update = resume["step"], resume["interval"], resume["update"]
+        state = state.replace(env_steps=types.UInt64(hi=step >> 32, lo=step & 0xFFFFFFFF))
     state, env_state = jax.device_put_replicated(strong_types(state), devices), strong_types(env_state)
 
-    def report(step):
-        if process_id == 0 and on_interval is not None:
-            host = jax.tree.map(np.asarray, unpmap((state.normalizer_params, state.params.policy, state.params.value,
-                                                     adam_of(state.optimizer_state))))
-            on_interval(step, make_policy, host[:3], host[3], env_state)
+    def host_params():
+        return jax.tree.map(np.asarray, unpmap((state.normalizer_params, state.params.policy, state.params.value,
+                                                 adam_of(state.optimizer_state))))
 
-    report(0)
-    step = 0
-    for _ in range(intervals):
-        epoch_key, local_key = jax.random.split(local_key)
-        key = jax.random.split(epoch_key, len(devices))
-        for _ in range(updates_per_interval):
+    def position(interval, done, key):
+        return Position(step, interval, done, local_key, key, env_state)
+
+    if process_id == 0 and on_interval is not None:
+        on_interval(step, make_policy, *(lambda h: (h[:3], h[3]))(host_params()), env_state,
+                    position(first_interval, first_update, None))
+    for interval in range(first_interval, intervals):
+        if resume is not None and interval == first_interval and resume.get("key") is not None:
+            key = jp.asarray(resume["key"])  # stopped within this interval: its keys as they were
+        else:
+            epoch_key, local_key = jax.random.split(local_key)
+            key = jax.random.split(epoch_key, len(devices))
+        for done in range(first_update if interval == first_interval else 0, updates_per_interval):
             state, env_state, key = update(state, env_state, key)
             step += steps_per_update
             if on_update is not None:
                 jax.block_until_ready(state.params)  # the update has run: the progress line's clock is true
                 on_update(step, env_state)
-        report(step)
+            if stop is not None and stop() and done + 1 < updates_per_interval:
+                host = host_params()
+                on_stop(step, host[:3], host[3], position(interval, done + 1, key))
+                return host[:3]
+        if process_id == 0 and on_interval is not None:
+            host = host_params()
+            on_interval(step, make_policy, host[:3], host[3], env_state, position(interval + 1, 0, None))
+        if stop is not None and stop() and interval + 1 < intervals:
+            host = host_params()
+            on_stop(step, host[:3], host[3], position(interval + 1, 0, None))
+            return host[:3]
     pmap.assert_is_replicated(state)
     pmap.synchronize_hosts()
     return jax.tree.map(np.asarray, unpmap((state.normalizer_params, state.params.policy, state.params.value)))

@@ -1,0 +1,89 @@
+"""Exact resume and preemption: what a checkpoint keeps so that a resumed run continues bit for bit,
+and a stop requested by a signal that ends the run with such a checkpoint.
+
+A checkpoint of a single-process run holds, besides the params and Adam's state, the run's
+position (`hexa_mjx.training.ppo.Position`: the keys and the training environments' state,
+physics, episode counters, goals, commands, curriculum levels and failure draws included) and the
+number of evaluations run, which sets the evaluator's key. A resume from it with the same step
+budget and evaluation count continues exactly: the same rows and the same final params as the run
+that was never stopped (tests/test_crashes.py). A checkpoint without it (written before, or by a
+multi-process run) resumes as before: the same training continued from new keys and new
+episodes, which the resume says.
+
+SIGTERM and SIGINT (`Preemption`) stop the run at the next update boundary; the run then writes a
+checkpoint with its position and exits with EXIT_CODE (`train.py`).
+"""
+
+from __future__ import annotations
+
+import signal
+
+import jax
+import numpy as np
+
+EXIT_CODE = 143  # 128 + SIGTERM: what schedulers expect of a job that stopped when asked
+
+
+class Preempted(Exception):
+    """The run stopped when asked, with a checkpoint at `step` in `path`."""
+
+    def __init__(self, step: int, path):
+        super().__init__(f"stopped at step {step:,}; checkpoint {path}")
+        self.step, self.path = step, path
+
+
+class Preemption:
+    """A stop asked for by SIGTERM or SIGINT, answered at the next update boundary. A second
+    signal while compiling or evaluating (where no update boundary comes soon) stops at once,
+    keeping the last complete checkpoint."""
+
+    def __init__(self):
+        self.asked = False
+
+    def install(self) -> "Preemption":
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(sig, self._handle)
+        return self
+
+    def _handle(self, signum, frame):
+        if self.asked:
+            raise KeyboardInterrupt
+        self.asked = True
+        print(f"\n{signal.Signals(signum).name}: stopping at the next update with a checkpoint "
+              "(send it again to stop at once, keeping the last complete checkpoint)", flush=True)
+
+    def __call__(self) -> bool:
+        return self.asked
+
+
+def schedule(cfg) -> dict:
+    """The settings an exact resume must share with the run it continues."""
+    return {"num_timesteps": cfg.num_timesteps, "num_evals": cfg.num_evals, "num_envs": cfg.num_envs,
+            "seed": cfg.seed}
+
+
+def saved_position(position, evaluations: int, cfg) -> tuple[dict, dict]:
+    """(arrays, facts) a checkpoint keeps for an exact resume from `position` (a ppo.Position)."""
+    arrays = {"local_key": np.asarray(position.local_key),
+              **({"key": np.asarray(position.key)} if position.key is not None else {}),
+              **{f"env_{i:04d}": np.asarray(leaf) for i, leaf in enumerate(jax.tree.leaves(position.env_state))}}
+    facts = {"step": position.step, "interval": position.interval, "update": position.update,
+             "evaluations": evaluations, "schedule": schedule(cfg)}
+    return arrays, facts
+
+
+def exact_resume(saved, cfg, processes: int) -> tuple[dict | None, str]:
+    """(ppo.train's `resume` with the evaluations run, or None; why not) from a checkpoint's saved
+    (arrays, facts) (None: it has none)."""
+    if saved is None:
+        return None, "its checkpoint has no saved keys and environments (written by an earlier version)"
+    arrays, facts = saved
+    if processes > 1:
+        return None, "a multi-process run resumes from new keys and episodes"
+    if facts["schedule"] != schedule(cfg):
+        changed = [k for k, v in schedule(cfg).items() if facts["schedule"].get(k) != v]
+        return None, f"{', '.join(changed)} changed since the checkpoint"
+    env = [arrays[k] for k in sorted(k for k in arrays if k.startswith("env_"))]
+    return {"step": facts["step"], "interval": facts["interval"], "update": facts["update"],
+            "local_key": arrays["local_key"], "key": arrays.get("key"), "env_state": env,
+            "evaluations": facts["evaluations"]}, ""
