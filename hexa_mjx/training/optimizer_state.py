@@ -2,9 +2,8 @@
 
 `hexa_mjx.training.ppo` optimizes with brax's PPO optimizer, `optax.adam` chained after gradient clipping,
 and hands each checkpoint Adam's part of that state (`ppo.adam_of`); a resume puts it back
-(`ppo.with_adam`), so Adam's moments and step count go on where they stopped. What a resume still
-does not restore, and why it is not bit-exact: the keys of the interrupted run and the episodes its
-environments were in (docs/RESULTS.md, "Reliability").
+(`ppo.with_adam`), so Adam's moments and step count go on where they stopped. The keys and the
+environments' state that make a resume exact are `hexa_mjx.training.resume`'s.
 """
 
 from __future__ import annotations
