@@ -11,6 +11,7 @@ import sys
 
 try:
     from hexa_mjx.training import config, distributed, jax_setup, loop as training, resume
+    from hexa_mjx.training.run_lock import RunLocked
 except ImportError as e:  # a missing package, or a MUJOCO_GL that MuJoCo cannot use
     print(f"error: {e}", file=sys.stderr)
     sys.exit(2)
@@ -39,6 +40,9 @@ def main(argv=None) -> int:
         return 2
     try:
         training.train(cfg, stop=preemption)
+    except RunLocked as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
     except resume.Preempted as e:
         run_dir = e.path.parent.parent if e.path is not None else cfg.run_dir
         print(f"stopped at step {e.step:,} with a checkpoint; continue exactly with: python train.py --run_dir "

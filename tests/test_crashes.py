@@ -2,11 +2,15 @@
 evaluation row exactly once, every checkpoint readable, no temporary folder left, and Adam's state
 carried across (the last resume runs on 2 processes: process 0 reads and shares it)."""
 
+import dataclasses
+import json
 import signal
+import socket
 
 import jax
 import numpy as np
 import optax
+import pytest
 
 from hexa_mjx.training import checkpoints, config, crash_points as faults, optimizer_state, ppo, loop as training
 
@@ -119,3 +123,31 @@ def test_kills_and_sigterms_resume_bit_for_bit(tmp_path, cache_env):
                       for r in (whole, stopped))
     for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)):
         np.testing.assert_array_equal(x, y)  # the final params, bit for bit
+
+
+def test_a_second_writer_is_refused_and_a_stale_lock_taken_over(tmp_path, cache_env, capsys):
+    import os
+    import subprocess
+    import time
+
+    from hexa_mjx.training.run_lock import RunLock, RunLocked
+
+    run_dir = tmp_path / "run"
+    holder = subprocess.Popen(["sleep", "60"])
+    try:
+        cfg = config.validate(config.parse_args([*EXACT, "--run_dir", str(run_dir)]))
+        (run_dir / "config.json").write_text(json.dumps(dataclasses.asdict(cfg)))  # a run that trains now
+        (run_dir / ".lock").write_text(json.dumps({"pid": holder.pid, "host": socket.gethostname(), "since": "now"}))
+        start = time.time()
+        proc = run("train.py", *EXACT, "--run_dir", str(run_dir), "--resume", env=cache_env, check=False)
+        assert proc.returncode == 2 and f"process {holder.pid} on {socket.gethostname()}" in proc.stderr, proc.stderr
+        assert "Traceback" not in proc.stderr and time.time() - start < 60
+        with pytest.raises(RunLocked, match="stop it first"):
+            RunLock(run_dir).acquire()
+    finally:
+        holder.kill()
+        holder.wait()
+    with RunLock(run_dir):  # its process is gone: the lock is stale and taken over
+        assert json.loads((run_dir / ".lock").read_text())["pid"] == os.getpid()
+    assert "no longer runs: taking the run over" in capsys.readouterr().out
+    assert not (run_dir / ".lock").exists()  # released on the way out

@@ -7,6 +7,7 @@ see `hexa_mjx.training.config`, `hexa_mjx.training.checkpoints` and `hexa_mjx.tr
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import json
@@ -28,6 +29,7 @@ from hexa_mjx.mdp.failure_schedule import schedule_summary
 from hexa_mjx.training.jax_setup import devices_for, prepare_jax
 from hexa_mjx.training.optimizer_state import adam_template
 from hexa_mjx.training.progress import Logger, keep_rows_up_to
+from hexa_mjx.training.run_lock import RunLock
 from hexa_mjx.evaluation.run_evaluator import RunEvaluator
 from hexa_mjx.engines.wrappers import mean_last_return
 from hexa_mjx import atomic
@@ -138,8 +140,6 @@ def resume_point(cfg: TrainConfig, run_dir: Path, template, optimizer_template) 
     return start_step, restore, optimizer, position
 
 
-# Long by design: the run's steps top to bottom (environment, resume point, logger, PPO, the
-# last evaluation), each a call to a named helper, as a CleanRL script reads.
 def train(cfg: TrainConfig, on_eval=None, stop=None) -> dict:
     """Run (or resume) PPO for `cfg`; returns the last evaluation row. `on_eval(row)` is called with
     each evaluation's metrics.jsonl row (a sweep reports them to its scheduler). When `stop()` says
@@ -147,6 +147,15 @@ def train(cfg: TrainConfig, on_eval=None, stop=None) -> dict:
     prepare_jax(cpu_devices=cfg.cpu_devices, compile_cache=cfg.compile_cache)
     main = distributed.is_main()  # process 0 (or the only one) reads and writes the run directory
     cfg = validate(cfg, writes=main)
+    with RunLock(cfg.run_dir) if main else contextlib.nullcontext():  # one writer per run directory
+        return run(cfg, main, on_eval, stop)
+
+
+# Long by design: the run's steps top to bottom (environment, resume point, logger, PPO, the
+# last evaluation), each a call to a named helper, as a CleanRL script reads.
+def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
+    """`train`'s run of a validated config, by the process that holds the run directory (`main`)
+    or another process of a multi-process run."""
     run_dir = Path(cfg.run_dir)
     # The curriculum shapes the training environment only: evaluations see the full task.
     env = make_env_for(cfg, curriculum_levels=cfg.curriculum_levels)
