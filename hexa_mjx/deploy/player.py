@@ -71,6 +71,9 @@ def env_for(policy: OnnxPolicy, model_path: str | Path | None = None, randomize:
         raise ValueError(f"the {task} task observes {size} values, the policy {policy.path} "
                          f"expects {meta['observation_size']}: it was exported for another task or version")
     settings = {**meta["env_config"], **{k: v for k, v in overrides.items() if v is not None}}
+    # A policy file never names a file to open: the project's model, or the one the user passes
+    # (checked against the policy's model hash, model_matches).
+    settings.pop("model_path", None)
     if model_path is not None:
         settings["model_path"] = str(model_path)
     known = {f.name for f in dataclasses.fields(EnvConfig)}  # a newer export's extra settings are ignored

@@ -107,9 +107,12 @@ def initialize(coordinator: str = "", num_processes: int = 1, process_id: int = 
             wait_for_coordinator(coordinator, timeout_s)
         print(f"process {process_id} of {num_processes}: joining the coordinator at {coordinator} "
               f"(up to {timeout_s:g} s for all processes to arrive)", flush=True)
+        # The coordinator listens on the address named, not on every interface: it has no
+        # authentication, so a local run stays on loopback (docs/SCALE_OUT.md, "Security").
         jax.distributed.initialize(coordinator_address=coordinator, num_processes=num_processes,
                                    process_id=process_id, initialization_timeout=int(max(1, timeout_s)),
-                                   shutdown_timeout_seconds=int(max(1, timeout_s)))
+                                   shutdown_timeout_seconds=int(max(1, timeout_s)),
+                                   coordinator_bind_address=coordinator if process_id == 0 else None)
         return True
     if not coordinator and scheduled_tasks() > 1:
         print(f"joining the {scheduled_tasks()}-task job the scheduler started (jax.distributed)", flush=True)

@@ -74,15 +74,21 @@ def keep_rows_up_to(run_dir: Path, step: int) -> set[int]:
     path = Path(run_dir) / "metrics.jsonl"
     if not path.is_file():
         return set()
-    kept, lines = set(), []
-    for line in path.read_text().splitlines():
+    kept, lines, dropped = set(), [], 0
+    for line in path.read_text(errors="replace").splitlines():
         try:
             row = json.loads(line)
-        except json.JSONDecodeError:  # a line cut short by a crash
+        except json.JSONDecodeError:  # a line cut short by a crash, or damaged
+            row = None
+        if not (isinstance(row, dict) and isinstance(row.get("step"), int)):
+            dropped += bool(line.strip())
             continue
-        if row.get("step", math.inf) <= step and row["step"] not in kept:
+        if row["step"] <= step and row["step"] not in kept:
             kept.add(row["step"])
             lines.append(json.dumps(row))
+    if dropped:
+        print(f"note: {path}: dropped {dropped} line(s) that are not evaluation rows (cut short by a crash, or "
+              "damaged)")
     atomic.write(path, "".join(line + "\n" for line in lines))
     return kept
 
