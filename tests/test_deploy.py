@@ -3,6 +3,7 @@
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import jax
 import jax.numpy as jp
@@ -292,3 +293,15 @@ def test_grid_points_set_each_quantity_and_workers_change_nothing():
     alone = sweeps.evaluate_points("policies/goal.onnx", points, episodes=2, episode_length=60)
     pooled = sweeps.evaluate_points("policies/goal.onnx", points, episodes=2, workers=2, episode_length=60)
     assert alone == pooled and [r["mass"] for r in alone] == [0.8, 1.2] and alone[0]["episodes"] == 2
+
+
+def test_a_policy_file_never_names_a_file_to_open(tmp_path):
+    arrays = {"mean": np.zeros(52, np.float32), "std": np.ones(52, np.float32), "squash": False,
+              "layers": [(np.ones((52, 18), np.float32), np.zeros(18, np.float32))]}
+    meta = export.read_metadata(POLICIES / "goal.onnx")
+    crafted = tmp_path / "crafted.onnx"
+    crafted.write_bytes(export.onnx_model(arrays, {**meta, "env_config": {**meta["env_config"],
+                                                                           "model_path": "../../../../etc/passwd"}})
+                        .SerializeToString())
+    env = player.env_for(player.OnnxPolicy(crafted))
+    assert Path(env.config.model_path) == robot.MODEL_XML

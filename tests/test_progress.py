@@ -30,3 +30,15 @@ def test_an_evaluation_starts_a_new_rate_window():
     eta.update(32.0, 200)
     assert eta.rate == pytest.approx(100.0)
     assert Eta(1_000, 2).left(0) != Eta(1_000, 2).left(0)  # NaN before any rate
+
+
+def test_damaged_metrics_lines_are_dropped_with_a_note(tmp_path, capsys):
+    import json
+
+    from hexa_mjx.training.progress import keep_rows_up_to
+
+    path = tmp_path / "metrics.jsonl"
+    path.write_text('{"step": 0, "x": 1}\n[1]\n{"step": 64}\n{"step": 64}\n{"step": 128}\n{"step": 19')
+    assert keep_rows_up_to(tmp_path, 64) == {0, 64}
+    assert [json.loads(line)["step"] for line in path.read_text().splitlines()] == [0, 64]
+    assert f"{path}: dropped 2 line(s)" in capsys.readouterr().out
