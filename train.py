@@ -11,6 +11,8 @@ import sys
 
 try:
     from hexa_mjx.training import config, distributed, jax_setup, loop as training, resume
+    from hexa_mjx.training.checkpoints import CheckpointWriteError
+    from hexa_mjx.training.progress import RowWriteError
     from hexa_mjx.training.run_lock import RunLocked
 except ImportError as e:  # a missing package, or a MUJOCO_GL that MuJoCo cannot use
     print(f"error: {e}", file=sys.stderr)
@@ -43,6 +45,9 @@ def main(argv=None) -> int:
     except RunLocked as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
+    except (CheckpointWriteError, RowWriteError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 1
     except resume.Preempted as e:
         run_dir = e.path.parent.parent if e.path is not None else cfg.run_dir
         print(f"stopped at step {e.step:,} with a checkpoint; continue exactly with: python train.py --run_dir "

@@ -75,3 +75,20 @@ def test_resume_falls_back_past_a_bad_optimizer_state(template, tmp_path, capsys
     checkpoints.save_checkpoint(tmp_path, 200, template, poisoned)
     step, _, adam, _ = checkpoints.load_latest(tmp_path, template, adam_template)
     assert step == 100 and adam is not None and "non-finite (NaN or inf) optimizer state" in capsys.readouterr().err
+
+
+def test_a_full_disk_keeps_the_last_checkpoint_and_leaves_nothing_behind(tmp_path, monkeypatch):
+    import errno
+
+    from hexa_mjx.training import crash_points as faults
+
+    template = ({"w": np.ones(3, np.float32)},)
+    checkpoints.save_checkpoint(tmp_path, 64, template)
+    monkeypatch.setenv(faults.VARIABLE, "checkpoint-writing:ENOSPC")
+    with pytest.raises(checkpoints.CheckpointWriteError, match="No space left on device") as caught:
+        checkpoints.save_checkpoint(tmp_path, 128, template)
+    assert isinstance(caught.value.__cause__, OSError) and caught.value.__cause__.errno == errno.ENOSPC
+    assert "000000000128" in str(caught.value) and "--resume" in str(caught.value)
+    assert [s for s, _ in checkpoints.list_checkpoints(tmp_path)] == [64]
+    assert not list((tmp_path / "checkpoints").glob("tmp-*"))
+    assert checkpoints.load_checkpoint(checkpoints.list_checkpoints(tmp_path)[0][1], template)[0] == 64

@@ -151,3 +151,12 @@ def test_a_second_writer_is_refused_and_a_stale_lock_taken_over(tmp_path, cache_
         assert json.loads((run_dir / ".lock").read_text())["pid"] == os.getpid()
     assert "no longer runs: taking the run over" in capsys.readouterr().out
     assert not (run_dir / ".lock").exists()  # released on the way out
+
+
+def test_a_full_disk_stops_the_run_with_one_line(tmp_path, cache_env):
+    run_dir = tmp_path / "run"
+    proc = run("train.py", *EXACT, "--run_dir", str(run_dir), env={**cache_env, faults.VARIABLE: "checkpoint-writing:ENOSPC"},
+               check=False)
+    assert proc.returncode == 1 and "Traceback" not in proc.stderr, proc.stderr
+    assert "could not write checkpoint" in proc.stderr and "No space left on device" in proc.stderr
+    assert not checkpoints.list_checkpoints(run_dir) and not list((run_dir / "checkpoints").glob("tmp-*"))

@@ -60,6 +60,26 @@ def save_checkpoint(run_dir: Path, step: int, params, optimizer=None, resume: tu
     root.mkdir(parents=True, exist_ok=True)
     final, tmp = root / f"{step:012d}", root / f"tmp-{step:012d}-{os.getpid()}"
     shutil.rmtree(tmp, ignore_errors=True)
+    try:
+        write_files(tmp, step, params, optimizer, resume)
+    except Exception as e:  # a full disk, a lost mount: the last complete checkpoint stays as it was
+        shutil.rmtree(tmp, ignore_errors=True)
+        cause = e.strerror if isinstance(e, OSError) and e.strerror else f"{type(e).__name__}: {str(e)[:200]}"
+        raise CheckpointWriteError(f"could not write checkpoint {final} ({cause}); the last complete checkpoint "
+                                   f"in {root} is kept: make room, then continue with --resume") from e
+    if final.exists():
+        shutil.rmtree(final)
+    tmp.rename(final)
+    faults.point("checkpoint-saved")
+    return final
+
+
+class CheckpointWriteError(OSError):
+    """A checkpoint could not be written; nothing of it is left behind."""
+
+
+def write_files(tmp: Path, step: int, params, optimizer=None, resume=None) -> None:
+    """A checkpoint's files in folder `tmp` (save_checkpoint renames it when complete)."""
     checkpointer = checkpointer_here()
     checkpointer.save(tmp.resolve() / "params", host_tree(params))
     checkpointer.wait_until_finished()
@@ -73,11 +93,6 @@ def save_checkpoint(run_dir: Path, step: int, params, optimizer=None, resume: tu
         meta.update(resume=facts, resume_sha256=digest(tmp / RESUME_FILE))
     faults.point("checkpoint-writing")
     (tmp / "step.json").write_text(json.dumps(meta))
-    if final.exists():
-        shutil.rmtree(final)
-    tmp.rename(final)
-    faults.point("checkpoint-saved")
-    return final
 
 
 def checkpointer_here():

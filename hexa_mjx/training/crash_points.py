@@ -4,7 +4,8 @@ moment of a training run.
     HEXA_MJX_KILL_AT=NAME[@N][:TERM] python train.py ...
 
 kills the run the N-th time (default 1st) it reaches the point NAME (with `:TERM`, sends it
-SIGTERM instead, as a scheduler preempting it would):
+SIGTERM instead, as a scheduler preempting it would; with `:ENOSPC`, fails there as a full disk
+would, with OSError 28):
 
 - `training-started`: after the step-0 evaluation, before the first checkpoint;
 - `row-written`: an evaluation's row written to metrics.jsonl, its checkpoint not yet saved;
@@ -17,6 +18,7 @@ Unset (the normal case), `point` does nothing but compare a string.
 
 from __future__ import annotations
 
+import errno
 import os
 import signal
 
@@ -37,4 +39,6 @@ def point(name: str) -> None:
         return
     _reached[name] = _reached.get(name, 0) + 1
     if _reached[name] == int(nth or 1):
+        if how == "ENOSPC":
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
         os.kill(os.getpid(), signal.SIGTERM if how == "TERM" else signal.SIGKILL)

@@ -93,6 +93,10 @@ def keep_rows_up_to(run_dir: Path, step: int) -> set[int]:
     return kept
 
 
+class RowWriteError(OSError):
+    """An evaluation row could not be written."""
+
+
 class Logger:
     """metrics.jsonl rows, TensorBoard scalars and one console line per evaluation; between
     evaluations a progress line at least every PROGRESS_INTERVAL_S, and lines that say when the
@@ -155,8 +159,12 @@ class Logger:
         row = {"step": step, "walltime_s": round(elapsed, 2), "env_steps_per_s": rate, **summarize(metrics),
                **{k: float(v) for k, v in metrics.items()
                   if k.startswith(("eval/episode_reward/", "curriculum/", "leg_failure/"))}}
-        with open(self.path, "a") as f:
-            f.write(json.dumps(row) + "\n")
+        try:
+            with open(self.path, "a") as f:
+                f.write(json.dumps(row) + "\n")
+        except OSError as e:  # a full disk: a row cut short is dropped with a note on resume
+            raise RowWriteError(f"could not write an evaluation row to {self.path} ({e.strerror or e}); the last "
+                                "complete checkpoint is kept: make room, then continue with --resume") from e
         for key, value in row.items():
             if key != "step" and isinstance(value, float) and math.isfinite(value):
                 self.tb.add_scalar(key.replace("eval/episode_", ""), value, step)
