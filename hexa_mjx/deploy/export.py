@@ -137,6 +137,7 @@ def export(ckpt: str | Path, out: str | Path) -> Path:
     out = Path(out)
     if out.suffix != ".onnx" or out.is_dir():
         raise ValueError(f"-o must name a .onnx file, got {out}")
+    config.writable_folder(out.parent, "-o's folder")  # before anything loads: a clear line, no temporary left
     run_dir, ckpt_dir = checkpoints.resolve_checkpoint(Path(ckpt))
     cfg = config.load_config(run_dir)
     env = config.make_env_for(cfg)

@@ -12,6 +12,8 @@ torso tracks from above.
 
 from __future__ import annotations
 
+from hexa_mjx import atomic
+
 import argparse
 import json
 from pathlib import Path
@@ -83,12 +85,14 @@ def plot_runs(run_dirs: list[Path], out: Path, title: str = "") -> Path:
 
 
 def save_figure(fig, out: Path) -> Path:
-    """Write `fig` to the PNG `out` (creating its folder) and free it."""
+    """Write `fig` to the PNG `out` atomically (creating its folder) and free it."""
     import matplotlib.pyplot as plt
 
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
+    try:
+        with atomic.replacing(out) as tmp:  # a full disk leaves no half-written PNG
+            fig.savefig(tmp, dpi=110)
+    finally:
+        plt.close(fig)
     return out
 
 

@@ -200,6 +200,6 @@ def plot_tracking(task, dt: float, traj: dict, out):
     if points:
         axes[1].legend()
     fig.tight_layout()
-    fig.savefig(out, dpi=100)
-    plt.close(fig)
-    return out
+    from hexa_mjx.evaluation.plots import save_figure
+
+    return save_figure(fig, out)
