@@ -65,6 +65,8 @@ def main(argv=None) -> int:
     if "paths" in result:
         print(f"tracks from above: {result['paths']}")
     print(f"foot-contact diagram: {result['gait_diagram']}")
+    print("time: " + ", ".join(f"{k} {v:.1f} s" for k, v in result["time_s"].items()) + " (the rollout includes "
+          "compiling it, seconds when the compile cache has it)")
     return 0
 
 

@@ -6,6 +6,7 @@
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 
 import jax
@@ -225,8 +226,11 @@ def evaluate(ckpt: str | Path, episodes: int = 128, videos: int = 1, out: str | 
     check_writable(out)
     step, params = checkpoints.load_checkpoint(ckpt_dir, training.init_params(cfg, env))
     policy = training.make_inference(cfg, env, params, deterministic=True)
+    clock = [time.perf_counter()]  # where eval.py's time goes: rollout (compiling included), figures, plots, video
     start, traj = rollout(env, policy, episodes, seed, ranges=randomization.Ranges() if randomize else None)
+    clock.append(time.perf_counter())
     table = episode_table(env, start, traj)
+    clock.append(time.perf_counter())
     run = {"task": env.name, "policy_task": cfg.task, "reward": cfg.reward, "ablate": cfg.ablate, "seed": cfg.seed,
            "start_joint_noise": env.config.start_joint_noise, "start_yaw_noise": env.start_yaw_range,
            "max_contact_points": env.config.max_contact_points, "episode_length": env.config.episode_length,
@@ -237,6 +241,7 @@ def evaluate(ckpt: str | Path, episodes: int = 128, videos: int = 1, out: str | 
     if paths is not None:
         result["paths"] = str(paths)
     result["gait_diagram"] = str(plot_gait(env, traj, table, out / "gait.png"))
+    clock.append(time.perf_counter())
     if video:
         for i in range(min(videos, episodes)):
             n = int(traj["alive"][:, i].sum())
@@ -247,6 +252,8 @@ def evaluate(ckpt: str | Path, episodes: int = 128, videos: int = 1, out: str | 
             render_video(env, frames, path, goals if env.task.has_goal else None, env.config.waypoints,
                          shadows=shadows, commands=commands)
             result["videos"].append(str(path))
+    clock.append(time.perf_counter())
+    result["time_s"] = dict(zip(("rollout", "figures", "plots", "video"), np.round(np.diff(clock), 1).tolist()))
     atomic.write(out / "metrics.json", json.dumps(result, indent=1))
     return result
 

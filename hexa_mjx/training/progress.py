@@ -115,6 +115,7 @@ class Logger:
         self.first_update_s = None
         self.evaluation_t0, self.evaluation_ran = None, False  # when the first evaluation started; whether it ran
         self.eta, self.this_evaluation_t0 = Eta(cfg.num_timesteps, cfg.num_evals), None
+        self.evaluation_s = []  # each evaluation's wall time (the first compiles its program too)
 
     def compiling(self, evaluation_first: bool = True) -> None:
         """Say that the programs are being compiled (or loaded from cache): the evaluation's first
@@ -185,8 +186,10 @@ class Logger:
         """An evaluation has run and its row is written; the first one says that the evaluation
         program is ready (and, before training, that the training one is compiling)."""
         now = time.time()
-        if self.this_evaluation_t0 is not None and self.evaluation_ran:  # the first one also compiled
-            self.eta.evaluation(now - self.this_evaluation_t0)
+        if self.this_evaluation_t0 is not None:
+            self.evaluation_s.append(now - self.this_evaluation_t0)
+            if self.evaluation_ran:  # the first one also compiled: not a guide to the others
+                self.eta.evaluation(now - self.this_evaluation_t0)
         self.eta.paused()
         if self.evaluation_t0 is not None:
             before_training = self.phase == "evaluation"
@@ -198,6 +201,12 @@ class Logger:
         self.last_line_t, self.last_line_step = now, step
 
     def close(self):
+        """Say what share of the run's wall time went to evaluating, and close TensorBoard."""
+        total = time.time() - self.t0
+        if self.evaluation_s and total > 0:
+            spent = sum(self.evaluation_s)
+            print(f"evaluations: {len(self.evaluation_s)} took {spent:.0f} s, {spent / total:.0%} of the run's "
+                  f"{total:.0f} s (the first includes compiling its program)", flush=True)
         self.tb.close()
 
 
