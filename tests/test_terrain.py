@@ -56,6 +56,17 @@ def test_terrain_sizes_follow_the_kind_and_difficulty():
     beyond_ramp = np.hypot(*np.meshgrid(grid, grid)) > 1.0  # 2 steps = 6 cm, 0.34 m of ramp past the disc
     assert set(np.round(np.unique(steps[beyond_ramp]) / terrain.STEP_HEIGHT, 6)) == {0.0, 1.0, 2.0}
     assert not np.array_equal(terrain.generate("bumps", seed=1).heights, bumps.heights)  # the seed matters
+    steep = terrain.generate("steep").heights
+    gy, gx = np.gradient(steep, terrain.CELL)
+    angle = np.degrees(np.arctan(np.hypot(gx, gy)))
+    assert np.median(angle[angle > 1]) == pytest.approx(terrain.STEEP_DEG, abs=0.3)
+    stairs = terrain.generate("stairs").heights
+    far = np.hypot(*np.meshgrid(grid, grid)) > 2.0  # past the spawn disc's ramp
+    risers = np.round(np.unique(stairs[far]) / terrain.STAIR_RISER, 6)
+    # Whole risers from the squares' edges (0) to their centres: up one flight and down the next.
+    assert set(risers) == set(range(int(terrain.SLOPE_PERIOD / 2 / terrain.STAIR_TREAD) + 1))
+    hard = terrain.generate("hard", seed=4).heights
+    assert np.isin(np.round(hard[far].max(), 6), np.round([steep.max(), stairs.max()], 6)).any()
     for kind in terrain.KINDS:  # the start stays flat, so the settled pose is the same everywhere,
         t = terrain.generate(kind, seed=5)  # and the terrain rises from it by no more than SLOPE_DEG
         assert terrain.ground_height(t, np.array([[0.0, 0.0], [0.3, -0.3]])) == pytest.approx(0.0)

@@ -97,7 +97,8 @@ class EnvConfig:
     obs_noise: float = setting(0.0, "observation noise, a multiple of hexa_mjx.mdp.observations.NOISE_SCALES "
                                     "(1: Playground's levels)")
     terrain: str = setting("flat", "ground: the flat floor, or a heightfield (hexa_mjx.mdp.terrain: 4 cm bumps, "
-                                   "10-degree slopes, 3 cm steps, or patches of each)", choices=list(TERRAINS))
+                                   "10-degree slopes, 3 cm steps, patches of each (mixed), 15-degree slopes "
+                                   "(steep), stairs of 5 cm risers, or patches of every kind (hard))", choices=list(TERRAINS))
     terrain_seed: int = setting(0, "seed of the generated terrain")
     terrain_difficulty: float = setting(1.0, "the terrain's heights and slopes as a fraction of the full sizes "
                                              "(0 to 1)")

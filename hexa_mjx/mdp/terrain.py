@@ -7,7 +7,11 @@ MuJoCo C) see it as the floor. Kinds, at `terrain_difficulty` d in [0, 1] (1: th
 - bumps: smoothed random bumps from 0 to d x BUMP_HEIGHT;
 - slopes: pyramids on SLOPE_PERIOD squares whose sides slope at d x SLOPE_DEG;
 - steps: tiles of STEP_TILE at whole multiples of d x STEP_HEIGHT (0 to 2 steps up);
-- mixed: TILE-sized patches, each bumps, slopes, steps or flat.
+- steep: pyramids as slopes, at d x STEEP_DEG;
+- stairs: pyramids of stairs on SLOPE_PERIOD squares, risers of d x STAIR_RISER on STAIR_TREAD
+  treads, up to the square's centre and down its other side;
+- mixed: TILE-sized patches, each bumps, slopes, steps or flat;
+- hard: TILE-sized patches of every kind above (steep slopes and stairs included) and flat.
 
 A disc of SPAWN_RADIUS around the start stays at height 0, so the settled start pose is the
 same on every terrain; the terrain rises from it by ramps no steeper than d x SLOPE_DEG.
@@ -31,12 +35,15 @@ import numpy as np
 
 from hexa_mjx.robot.kinematics import namespace
 
-KINDS = ("flat", "bumps", "slopes", "steps", "mixed")
+KINDS = ("flat", "bumps", "slopes", "steps", "mixed", "steep", "stairs", "hard")
 HALF_SIZE = 10.0  # m, the heightfield spans +-this in x and y around the start
 CELL = 0.1  # m, grid spacing; MJX collides each geom with a patch of cells around it
 BUMP_HEIGHT = 0.04  # m
 SLOPE_DEG = 10.0  # degrees
 SLOPE_PERIOD = 2.0  # m, the side of a slope's pyramid
+STEEP_DEG = 15.0  # degrees
+STAIR_RISER = 0.05  # m: about 40% of the torso's 0.12 m height (legged_gym's 23 cm stairs are 46% of ANYmal's)
+STAIR_TREAD = 0.25  # m, about the body's length: a flight of 4 steps climbs 0.2 m to a square's centre
 STEP_HEIGHT = 0.03  # m
 STEP_TILE = 0.5  # m
 TILE = 2.0  # m, patch size of the mixed terrain (a whole slope period, so patches meet at height 0)
@@ -91,6 +98,17 @@ def _slopes(x, y, rng, d):
     return grade * np.minimum(_triangle(x, SLOPE_PERIOD), _triangle(y, SLOPE_PERIOD))
 
 
+def _steep(x, y, rng, d):
+    grade = np.tan(np.radians(d * STEEP_DEG))
+    return grade * np.minimum(_triangle(x, SLOPE_PERIOD), _triangle(y, SLOPE_PERIOD))
+
+
+def _stairs(x, y, rng, d):
+    # legged_gym's pyramid stairs: one riser per tread from the square's edge (height 0) inward.
+    inward = np.minimum(_triangle(x, SLOPE_PERIOD), _triangle(y, SLOPE_PERIOD))
+    return d * STAIR_RISER * np.floor(inward / STAIR_TREAD + 1e-9)
+
+
 def _steps(x, y, rng, d):
     tiles = np.floor(x / STEP_TILE).astype(int), np.floor(y / STEP_TILE).astype(int)
     levels = rng.integers(0, 3, size=(tiles[1].max() - tiles[1].min() + 1, tiles[0].max() - tiles[0].min() + 1))
@@ -119,17 +137,19 @@ def generate(kind: str, seed: int = 0, difficulty: float = 1.0, levels: int = 0)
         difficulty = difficulty * (column + 1) / levels
         spawns = [(cx, cy) for cx in spawn_points() for cy in spawn_points()]
     makers = {"bumps": _bumps, "slopes": _slopes, "steps": _steps}
+    hard = {"steep": _steep, "stairs": _stairs}  # not in "mixed", which keeps its own patches
     if kind == "flat":
         heights = np.zeros_like(x)
-    elif kind == "mixed":
-        layers = {name: make(x, y, rng, difficulty) for name, make in makers.items()}
+    elif kind in ("mixed", "hard"):
+        chosen = {**makers, **hard} if kind == "hard" else makers
+        layers = {name: make(x, y, rng, difficulty) for name, make in chosen.items()}
         layers["flat"] = np.zeros_like(x)
         names = sorted(layers)
         tiles = np.floor(x / TILE).astype(int), np.floor(y / TILE).astype(int)
         choice = rng.integers(0, len(names), size=(64, 64))[tiles[1] % 64, tiles[0] % 64]
         heights = np.choose(choice, [layers[n] for n in names])
     else:
-        heights = makers[kind](x, y, rng, difficulty)
+        heights = {**makers, **hard}[kind](x, y, rng, difficulty)
     # Flat discs at the starts that meet the terrain by ramps no steeper than the slopes of the same
     # difficulty, not by a cliff: every kind is >= 0, and the minimum with a cone keeps a slope's angle.
     off_disc = np.min([np.hypot(x - cx, y - cy) for cx, cy in spawns], axis=0) - SPAWN_RADIUS
