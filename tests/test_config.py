@@ -153,3 +153,18 @@ def test_reward_scale_flag_reaches_the_environment_and_survives_the_run_config(t
 def test_commands_of_earlier_versions_still_run(old, new):
     proc = subprocess.run([sys.executable, "-m", f"hexa_mjx.{old}", "--help"], capture_output=True, text=True)
     assert proc.returncode == 0 and f"python -m hexa_mjx.{new}" in proc.stdout, proc.stderr
+
+
+def test_init_from_takes_another_tasks_policy_that_observes_as_many_values(tmp_path, capsys):
+    from hexa_mjx.robot import constants as robot
+    from hexa_mjx.training import config as train_config
+
+    navigate = str(robot.REPO_ROOT / "policies" / "navigate")
+
+    cfg = train_config.parse_args(["--task", "velocity", "--init_from", navigate, "--run_dir",
+                                   str(tmp_path / "a")])
+    assert train_config.validate(cfg).init_from == navigate
+    assert "navigate-task policy" in capsys.readouterr().out
+    cfg = train_config.parse_args(["--task", "goal", "--init_from", navigate, "--run_dir", str(tmp_path / "b")])
+    with pytest.raises(train_config.ConfigError, match="observing 67 values, 'goal' here, 52"):
+        train_config.validate(cfg)

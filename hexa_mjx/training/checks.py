@@ -117,7 +117,7 @@ def validate(cfg: TrainConfig, writes: bool = True) -> TrainConfig:
 
 
 # What fixes the shapes of a run's params: a fine-tuning run must match its source in these.
-PARAM_SHAPE = ("task", "model", "hidden", "policy_dist")
+PARAM_SHAPE = ("model", "hidden", "policy_dist")
 
 
 def init_checkpoint(cfg: TrainConfig) -> Path:
@@ -129,10 +129,27 @@ def init_checkpoint(cfg: TrainConfig) -> Path:
     source = load_config(source_dir)
     differ = [f"{k} {getattr(source, k)!r} there, {getattr(cfg, k)!r} here" for k in PARAM_SHAPE
               if getattr(source, k) != getattr(cfg, k)]
+    if source.task != cfg.task:  # another task's policy fits if it observes as many values
+        sizes = [observation_size(t, cfg.model) for t in (source.task, cfg.task)]
+        if sizes[0] != sizes[1]:
+            differ.append(f"task {source.task!r} there, observing {sizes[0]} values, {cfg.task!r} here, {sizes[1]}")
+        elif not differ:
+            print(f"note: --init_from {cfg.init_from} is a {source.task}-task policy; its first inputs mean other "
+                  f"things in the {cfg.task} task, and training adapts it from there")
     if differ:
         raise ConfigError(f"--init_from {cfg.init_from}: its params do not fit this run ({'; '.join(differ)}); "
                           "set the same values or train from scratch")
     return checkpoint
+
+
+def observation_size(task: str, model: str = "") -> int:
+    """Values the policy of `task` observes on the run's robot."""
+    import mujoco
+
+    from hexa_mjx.robot import constants as robot
+
+    joints = mujoco.MjModel.from_xml_path(str(model or robot.MODEL_XML)).nu
+    return task_class(task).layout(joints)[-1][1]
 
 
 def check_run_dir(cfg: TrainConfig, run_dir: Path) -> None:
