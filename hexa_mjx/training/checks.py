@@ -12,6 +12,7 @@ from pathlib import Path
 import jax
 
 from hexa_mjx.mdp import rewards
+from hexa_mjx.robot import constants as robot
 from hexa_mjx.tasks import default_reward, task_class
 from hexa_mjx.training import distributed
 from hexa_mjx.training.checkpoints import list_checkpoints, resolve_checkpoint
@@ -118,12 +119,16 @@ def validate(cfg: TrainConfig, writes: bool = True) -> TrainConfig:
 
 # What fixes the shapes of a run's params: a fine-tuning run must match its source in these.
 PARAM_SHAPE = ("model", "hidden", "policy_dist")
+NOTED: set[str] = set()  # --init_from sources already noted as another task's
 
 
 def init_checkpoint(cfg: TrainConfig) -> Path:
     """The checkpoint folder --init_from names; ConfigError if there is none or its networks differ."""
+    source = Path(cfg.init_from)
+    if not source.exists() and (robot.REPO_ROOT / source).exists():  # a recipe's shipped policy, from anywhere
+        source = robot.REPO_ROOT / source
     try:
-        source_dir, checkpoint = resolve_checkpoint(Path(cfg.init_from))
+        source_dir, checkpoint = resolve_checkpoint(source)
     except FileNotFoundError as e:
         raise ConfigError(f"--init_from: {e}; give a run directory or one of its checkpoints/<step> folders") from None
     source = load_config(source_dir)
@@ -133,7 +138,8 @@ def init_checkpoint(cfg: TrainConfig) -> Path:
         sizes = [observation_size(t, cfg.model) for t in (source.task, cfg.task)]
         if sizes[0] != sizes[1]:
             differ.append(f"task {source.task!r} there, observing {sizes[0]} values, {cfg.task!r} here, {sizes[1]}")
-        elif not differ:
+        elif not differ and cfg.init_from not in NOTED:  # validated more than once per run: said once
+            NOTED.add(cfg.init_from)
             print(f"note: --init_from {cfg.init_from} is a {source.task}-task policy; its first inputs mean other "
                   f"things in the {cfg.task} task, and training adapts it from there")
     if differ:
@@ -145,8 +151,6 @@ def init_checkpoint(cfg: TrainConfig) -> Path:
 def observation_size(task: str, model: str = "") -> int:
     """Values the policy of `task` observes on the run's robot."""
     import mujoco
-
-    from hexa_mjx.robot import constants as robot
 
     joints = mujoco.MjModel.from_xml_path(str(model or robot.MODEL_XML)).nu
     return task_class(task).layout(joints)[-1][1]
