@@ -203,3 +203,57 @@ def plot_tracking(task, dt: float, traj: dict, out):
     from hexa_mjx.evaluation.plots import save_figure
 
     return save_figure(fig, out)
+
+
+def learning_curves(run_dirs, out):
+    """The tracking terms' mean per step (unscaled) at each training evaluation of velocity runs,
+    beside what standing still scores on the default commands."""
+    import json
+    from pathlib import Path
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from hexa_mjx.evaluation.plots import save_figure
+    from hexa_mjx.tasks.velocity import VelocityTask
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 3.6))
+    for k, run in enumerate(map(Path, run_dirs)):
+        cfg = json.loads((run / "config.json").read_text())
+        scales = dict(VelocityTask.rewards["velocity"])
+        scales.update({t: float(v) for t, v in (item.split("=") for item in cfg.get("reward_scale", []))})
+        rows = [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines() if line.strip()]
+        for ax, term in zip(axes, ("tracking_lin_vel", "tracking_ang_vel")):
+            ax.plot([r["step"] / 1e6 for r in rows],
+                    [r[f"eval/episode_reward/{term}"] / r["episode_length"] / scales[term] for r in rows],
+                    "o-", color=f"C{k}", label=run.name)
+    for ax, title, still in zip(axes, ("planar velocity", "yaw rate"), STANDING_STILL):
+        ax.axhline(still, color="gray", ls="--", label="standing still")
+        ax.set_xlabel("env steps, millions")
+        ax.set_title(f"{title} tracking per step, exp(-error^2 / 0.25)", fontsize=9)
+        ax.set_ylim(0, 1)
+    axes[0].legend(fontsize=7)
+    fig.tight_layout()
+    return save_figure(fig, Path(out))
+
+
+# The tracking terms' mean per step of a robot that stands still, over the default commands
+# (docs/RESULTS.md, "Velocity commands": 100,000 draws).
+STANDING_STILL = (0.663, 0.787)
+
+
+def main(argv=None) -> None:
+    """`python -m hexa_mjx.evaluation.tracking RUN [RUN ...] -o curves.png`: velocity runs' learning curves."""
+    import argparse
+
+    parser = argparse.ArgumentParser(prog="python -m hexa_mjx.evaluation.tracking", description=main.__doc__)
+    parser.add_argument("runs", nargs="+", help="velocity-task run directories")
+    parser.add_argument("-o", "--out", default="velocity_curves.png")
+    args = parser.parse_args(argv)
+    print(f"wrote {learning_curves(args.runs, args.out)}")
+
+
+if __name__ == "__main__":
+    main()
