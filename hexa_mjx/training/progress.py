@@ -170,8 +170,8 @@ class Logger:
             if key != "step" and isinstance(value, float) and math.isfinite(value):
                 self.tb.add_scalar(key.replace("eval/episode_", ""), value, step)
         self.tb.flush()
+        left = self.eta.left(step)  # before `evaluated` starts a new rate window
         self.evaluated(step)
-        left = self.eta.left(step)
         task = task_class(self.cfg.task)
         goal = (f"distance {row['final_distance']:.2f} m  success {row['success_rate']:.0%}  " if task.has_goal
                 else "")
