@@ -19,7 +19,7 @@ from hexa_mjx.engines.native import NativeEnv
 from hexa_mjx.tasks import TASKS
 
 POLICIES = robot.REPO_ROOT / "policies"
-SHIPPED = ("goal", "navigate")
+SHIPPED = ("goal", "navigate", "velocity")
 
 
 @pytest.fixture(scope="module")
@@ -152,6 +152,16 @@ def test_shipped_policies_succeed_on_the_current_model(shipped, task, episodes):
     assert summary["success_rate"] >= 0.9 and summary["fall_rate"] == 0.0, summary
     if task == "navigate":
         assert summary["goals_per_episode"] >= 5
+
+
+def test_shipped_velocity_policy_follows_its_commands_on_the_current_model(shipped):
+    policy = shipped["velocity"][2]
+    env = player.env_for(policy)
+    results = [player.run_episode(policy, env, seed) for seed in range(3)]
+    summary = player.summarize(results)
+    tracked = player.tracking(env, results)
+    # Native MuJoCo, three episodes of random commands (docs/RESULTS.md, "Velocity commands").
+    assert summary["fall_rate"] == 0.0 and tracked["velocity_rms"] < VELOCITY_RMS_BOUND, (summary, tracked)
 
 
 def run_play(*args, env=None):

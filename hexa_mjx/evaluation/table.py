@@ -25,7 +25,8 @@ def format_table(summary: dict, task=None) -> str:
         rows.append(("steps to the goal, mean of successes", "-" if steps is None else f"{steps:.0f}"))
     if goal and "body_contact_before_goal_mean" in summary:
         rows.append(("body contact before the goal, mean", f"{summary['body_contact_before_goal_mean']:.1f}"))
-    for phase in ("before_goal", "after_goal") if goal else ("before_goal",):
+    # Without a goal, every step is "after" it (the goal stays at the start, within the radius at once).
+    for phase in ("before_goal", "after_goal") if goal else ("after_goal",):
         if f"contacts_{phase}" in summary:
             counts = summary[f"contacts_{phase}"]
             counts = "-" if counts is None else ", ".join(f"{k} {v:.2f}" for k, v in counts.items())
