@@ -185,7 +185,7 @@ def main(argv=None) -> int:
     if env.task.uses_command:
         t = player.tracking(env, episodes)
         drift = t["stand_drift"]
-        if t["steps"]:  # commands held past the settling time (a path follower's change every step)
+        if t["steps"] and not args.follow:  # the follower's commands change every step: none settles
                 print(f"tracking ({t['settle_s']} s after each change left out, {t['average_s']} s average): velocity "
                   f"RMS {t['velocity_rms']:.3f} m/s, yaw rate RMS {t['yaw_rate_rms']:.3f} rad/s"
                   + (f", drift commanded to stand {drift['speed_mean']:.3f} m/s" if drift["commands"] else ""))
