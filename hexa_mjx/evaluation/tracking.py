@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from hexa_mjx.robot.kinematics import yaw
+
 SETTLE_S = 1.0  # s left out after each command change
 AVERAGE_S = 0.25  # s, the measured velocity's averaging window (a stride at about 4 Hz)
 SPEED_BANDS = (0.0, 0.25, 0.5, 0.75, 1.0, 1.5)  # m/s, commanded planar speed
@@ -104,7 +106,7 @@ def tracking_summary(task, dt: float, traj: dict, alive: np.ndarray, fell) -> tu
             kind, duration = names[classes[steps[0], i]], len(steps) * dt
             if kind == "zero":
                 xy = qpos[steps, i, :2]
-                turn = np.angle(np.exp(1j * np.diff(_yaw(qpos[steps, i]))).prod())
+                turn = np.angle(np.exp(1j * np.diff(yaw(qpos[steps, i, 3:7].T))).prod())
                 drift.append((np.linalg.norm(xy[-1] - xy[0]) / duration, abs(turn) / duration))
             elif "stance" in traj and commanded[steps[0], i, 2] == 0 and kind != "heading":
                 speed = float(np.linalg.norm(commanded[steps[0], i, :2]))
@@ -125,11 +127,6 @@ def tracking_summary(task, dt: float, traj: dict, alive: np.ndarray, fell) -> tu
     per_episode = {"velocity_rms": [_errors(commanded[:, i], velocity[:, i], settled[:, i]).get("velocity_rms")
                                     for i in range(command.shape[1])]}
     return summary, per_episode
-
-
-def _yaw(qpos):
-    w, x, y, z = (qpos[:, 3 + i] for i in range(4))
-    return np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
 
 
 def _band(lo: float, hi: float, records: list[dict]) -> dict:
@@ -154,7 +151,7 @@ def table_rows(summary: dict) -> list[tuple[str, str]]:
     rows = [(f"velocity RMS error ({t['average_s']} s average; instantaneous)",
              f"{t['velocity_rms']:.3f} m/s ({t['velocity_rms_instant']:.3f})"),
             ("yaw-rate RMS error (average; instantaneous)", f"{t['yaw_rate_rms']:.3f} rad/s ({t['yaw_rate_rms_instant']:.3f})"),
-            (f"  steps left out after each command change", f"{t['settle_s']} s")]
+            ("  steps left out after each command change", f"{t['settle_s']} s")]
     for name, c in t["classes"].items():
         rows.append((f"  {name}: velocity, yaw rate RMS; tracking share",
                      f"{c['velocity_rms']:.3f} m/s, {c['yaw_rate_rms']:.3f} rad/s; "

@@ -100,7 +100,7 @@ class VelocityTask(Task):
         share = (1.0 - cfg.command_zero_share) / (len(CLASSES) - 1)
         c = draws.choice(k[0], len(CLASSES), xp.asarray([cfg.command_zero_share] + [share] * (len(CLASSES) - 1)))
         u = [draws.uniform(k[i + 1], (), 0.0, 1.0) for i in range(3)]
-        (xlo, xhi), (ylo, yhi), (wlo, whi) = cfg.command_vx, cfg.command_vy, cfg.command_yaw_rate
+        xlo, xhi = cfg.command_vx
         full = [lo + ui * (hi - lo) for ui, (lo, hi) in zip(u, (cfg.command_vx, cfg.command_vy, cfg.command_yaw_rate))]
         is_ = lambda *names: sum((c == CLASSES.index(n)) * 1.0 for n in names)  # noqa: E731
         vx = (is_("forward") * u[0] * max(xhi, 0.0) + is_("backward") * u[0] * min(xlo, 0.0)

@@ -194,8 +194,8 @@ def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=No
         return Position(step, interval, done, local_key, key, env_state)
 
     if process_id == 0 and on_interval is not None:
-        on_interval(step, make_policy, *(lambda h: (h[:3], h[3]))(host_params()), env_state,
-                    position(first_interval, first_update, None))
+        host = host_params()
+        on_interval(step, make_policy, host[:3], host[3], env_state, position(first_interval, first_update, None))
     for interval in range(first_interval, intervals):
         if resume is not None and interval == first_interval and resume.get("key") is not None:
             key = jp.asarray(resume["key"])  # stopped within this interval: its keys as they were
