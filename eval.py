@@ -42,7 +42,7 @@ def main(argv=None) -> int:
                         help="each episode on its own randomized physics (train.py --randomize's ranges)")
     cli.add_env_flags(parser)
     output.add_argument("--shadows", action="store_true",
-                        help="render shadows and the skybox (5x slower without a GPU)")
+                        help="render shadows, the skybox and reflections (5x slower without a GPU)")
     parser.add_argument_group("run", "compiling").add_argument("--no_compile_cache", dest="compile_cache", action="store_false",
                         help="don't keep compiled programs in the per-user cache folder")
     args = parser.parse_args(cli.signed_values(sys.argv[1:] if argv is None else list(argv)))

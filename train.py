@@ -8,9 +8,10 @@ Flags and defaults: `python train.py --help` (hexa_mjx/config.py, TrainConfig).
 """
 
 import sys
+from pathlib import Path
 
 try:
-    from hexa_mjx.training import config, distributed, jax_setup, loop as training, resume
+    from hexa_mjx.training import checkpoints, config, distributed, jax_setup, loop as training, resume
     from hexa_mjx.training.checkpoints import CheckpointWriteError
     from hexa_mjx.training.progress import RowWriteError
     from hexa_mjx.training.run_lock import RunLocked
@@ -19,11 +20,33 @@ except ImportError as e:  # a missing package, or a MUJOCO_GL that MuJoCo cannot
     sys.exit(2)
 
 
+def kept(run_dir) -> str:
+    """What a stopped run leaves to resume from."""
+    saved = checkpoints.list_checkpoints(Path(run_dir))
+    return f"its last complete checkpoint (step {saved[-1][0]:,}) is kept" if saved else "it has no checkpoint yet"
+
+
 def main(argv=None) -> int:
     # A scheduler's SIGTERM (and Ctrl-C) stop training at the next update, with a checkpoint to
-    # resume from exactly (hexa_mjx.training.resume); a second one stops at once.
+    # resume from exactly (hexa_mjx.training.resume); before the first update, and at a second
+    # signal, at once.
     preemption = resume.Preemption().install()
-    cfg = config.parse_args(argv)
+    cfg = None
+    try:
+        cfg = config.parse_args(argv)
+        return run(cfg, preemption)
+    except resume.StoppedBeforeTraining as e:
+        where = f"{kept(cfg.run_dir)}; continue with: python train.py --run_dir {cfg.run_dir} --resume" if cfg else ""
+        print(f"{e}: stopped before the first update, with nothing new to save; {where}", file=sys.stderr)
+        return resume.EXIT_CODE
+    except KeyboardInterrupt:
+        print(f"\ninterrupted: {kept(cfg.run_dir) if cfg else 'nothing was trained'}; continue with --resume",
+              file=sys.stderr)
+        return 130
+
+
+def run(cfg, preemption) -> int:
+    """train.py for a parsed config: errors as one line and an exit code."""
     jax_setup.prepare_jax(cfg.cpu_devices, cfg.compile_cache)  # before anything starts JAX
     try:
         distributed.initialize(cfg.coordinator, cfg.num_processes, cfg.process_id, cfg.coordinator_timeout)
@@ -53,9 +76,6 @@ def main(argv=None) -> int:
         print(f"stopped at step {e.step:,} with a checkpoint; continue exactly with: python train.py --run_dir "
               f"{run_dir} --resume", file=sys.stderr)
         return resume.EXIT_CODE
-    except KeyboardInterrupt:
-        print("\ninterrupted: the last complete checkpoint is kept; continue with --resume", file=sys.stderr)
-        return 130
     return 0
 
 

@@ -13,6 +13,7 @@ import optax
 import pytest
 
 from hexa_mjx.training import checkpoints, config, crash_points as faults, optimizer_state, ppo, loop as training
+from hexa_mjx.training.progress import TIMING_FIELDS
 
 from conftest import NOISE, TINY, run
 from test_scale_out import free_port, process_flags, rows as metric_rows, train_processes
@@ -99,7 +100,7 @@ EXACT = ["--num_envs", "8", "--batch_size", "8", "--num_minibatches", "2", "--un
 
 def comparable(run_dir):
     """metrics.jsonl rows without their clock figures."""
-    return [{k: v for k, v in row.items() if k not in ("walltime_s", "env_steps_per_s")} for row in metric_rows(run_dir)]
+    return [{k: v for k, v in row.items() if k not in TIMING_FIELDS} for row in metric_rows(run_dir)]
 
 
 def test_kills_and_sigterms_resume_bit_for_bit(tmp_path, cache_env):
@@ -123,6 +124,16 @@ def test_kills_and_sigterms_resume_bit_for_bit(tmp_path, cache_env):
                       for r in (whole, stopped))
     for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)):
         np.testing.assert_array_equal(x, y)  # the final params, bit for bit
+
+
+def test_a_stop_before_the_first_update_is_at_once(tmp_path, cache_env):
+    """SIGTERM as the training programs start compiling: nothing to save, so no wait for the compile."""
+    run_dir = tmp_path / "run"
+    proc = run("train.py", *SETTINGS, "--run_dir", str(run_dir), env={**cache_env, faults.VARIABLE: "compiling:TERM"},
+               check=False)
+    assert proc.returncode == 143, (proc.returncode, proc.stderr)
+    assert "SIGTERM: stopped before the first update, with nothing new to save; it has no checkpoint yet" in proc.stderr
+    assert "training compiled" not in proc.stdout and not checkpoints.list_checkpoints(run_dir)
 
 
 def test_a_second_writer_is_refused_and_a_stale_lock_taken_over(tmp_path, cache_env, capsys):

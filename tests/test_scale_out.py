@@ -11,6 +11,7 @@ import time
 import pytest
 
 from hexa_mjx.training import config, distributed, jax_setup
+from hexa_mjx.training.progress import TIMING_FIELDS
 from hexa_mjx.studies import experiments, ray_runs
 
 from conftest import ROOT
@@ -129,7 +130,7 @@ def test_a_grid_on_ray_gives_the_sequential_runs_results(trained, tmp_path, loca
     todo, counts = experiments.plan(grid())
     assert counts == {"done": 0, "reused": 0, "partial": 0, "new": 1}
     ray_runs.run_grid(todo, run_cpus=devices, run_gpus=0)
-    drop = lambda row: {k: v for k, v in row.items() if k not in ("walltime_s", "env_steps_per_s")}  # noqa: E731
+    drop = lambda row: {k: v for k, v in row.items() if k not in TIMING_FIELDS}  # noqa: E731
     on_ray = tmp_path / "lr" / "lr_0.0003-s3"
     assert [drop(r) for r in rows(on_ray)] == [drop(r) for r in rows(run_dir)]
     assert experiments.plan(grid()) == ([], {"done": 1, "reused": 0, "partial": 0, "new": 0})

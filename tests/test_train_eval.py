@@ -245,6 +245,18 @@ def test_missing_opengl_names_the_package(env, monkeypatch, tmp_path):
         video.render_video(env, np.zeros((2, env.mj_model.nq)), tmp_path / "x.mp4", np.zeros((2, 2)))
 
 
+def test_a_render_worker_draws_the_frames_this_process_would(env):
+    """render_video splits a long video over worker processes: their frames are this process's."""
+    qpos = np.tile(np.asarray(env.qpos0), (3, 1))
+    qpos[:, 0] += [0.0, 0.3, 0.6]
+    frames = [(q, np.array([1.0, 0.5]), (0.5, 0.0, 0.3)) for q in qpos]
+    draw = dict(corners=None, width=64, height=48, shadows=False)
+    here = video.render_frames(env.mj_model, frames, **draw)
+    there = video.finish_render_worker(video.start_render_worker(env.mj_model, frames, draw), len(frames), 48, 64)
+    assert here.shape == (3, 48, 64, 3) and here.std() > 0 and not np.array_equal(here[0], here[2])
+    np.testing.assert_array_equal(there, here)
+
+
 def test_a_policy_runs_on_another_tasks_goals_with_its_own_observation():
     goal_run = config.TrainConfig()
     baseline = config.make_env_for(goal_run, task="navigate")  # the report's policy on navigation goals

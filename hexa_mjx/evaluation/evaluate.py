@@ -102,9 +102,8 @@ def rollout(env, policy, num_episodes: int, seed: int = 0, ranges=None):
     if models is None:
         start, traj = jax.pmap(run)(split(keys))
     else:  # each device gets its episodes' models; the fields that are not randomized are shared
-        shards = jax.tree.map(lambda axis, x: x if axis is None else split(x), model_axes, models,
-                              is_leaf=lambda axis: axis is None)
-        start, traj = jax.pmap(run, in_axes=(0, model_axes))(split(keys), shards)
+        start, traj = jax.pmap(run, in_axes=(0, model_axes))(split(keys), randomization.per_device(models, model_axes,
+                                                                                                  devices))
     merge = lambda x: np.moveaxis(np.asarray(x), 0, 1).reshape(x.shape[1], num_episodes, *x.shape[3:])  # noqa: E731
     return np.asarray(start).reshape(num_episodes, -1), jax.tree.map(merge, traj)
 

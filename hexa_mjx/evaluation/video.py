@@ -7,6 +7,9 @@ rendered from stored joint positions, so any engine's trajectory can be drawn.
 from __future__ import annotations
 
 import os
+import pickle
+import subprocess
+import sys
 import warnings
 from pathlib import Path
 
@@ -20,24 +23,78 @@ VIDEO_FPS = 30  # frames per second of videos (real time: every ctrl_hz / 30th c
 
 
 def render_video(env, qpos_frames: np.ndarray, path: Path, goals: np.ndarray, waypoints=(), width=640,
-                 height=480, fps: float = VIDEO_FPS, shadows: bool = False, commands=None) -> int:
+                 height=480, fps: float = VIDEO_FPS, shadows: bool = False, commands=None, workers: int = 0) -> int:
     """Render qpos frames (T, nq, one per control step) from the tracking camera into a real-time
     MP4 of about `fps` frames per second, with the goal marker at each frame's goal (T, 2; None:
-    no marker), the
-    waypoint path (start -> waypoints) and each frame's velocity command (T, 3; `draw_command`)
-    drawn. Returns the number of frames written.
+    no marker), the waypoint path (start -> waypoints) and each frame's velocity command (T, 3;
+    `draw_command`) drawn. Returns the number of frames written.
 
-    Shadows and the skybox are off unless `shadows`: with software OpenGL (no GPU) they cost 5x
-    the frame rate (docs/RESULTS.md, "Evaluation time")."""
+    Shadows, the skybox and the floor's reflection are off unless `shadows`: with software
+    OpenGL (no GPU) shadows cost 5x the frame rate and the reflection, a second pass over the
+    scene, 1.3x (docs/RESULTS.md, "Evaluation time", "Cheaper evaluations"). The frames are drawn
+    by `workers` processes (0: one per core, at most RENDER_WORKERS), each a contiguous part of
+    the video with one rendering thread (software OpenGL spreads one frame over the cores poorly)."""
     import imageio.v2 as imageio
-    import mujoco
 
-    model = env.mj_model
-    data = mujoco.MjData(model)
-    mocap = model.body_mocapid[model.body(robot.GOAL_BODY).id]
     if not os.environ.get("MUJOCO_GL"):
         raise RuntimeError(f"no off-screen OpenGL found (neither EGL nor OSMesa): install it with "
                            f"`apt-get install {GL_PACKAGES}`, or pass --no-video")
+    stride = max(int(round(1 / (env.dt * fps))), 1)
+    if goals is None:  # the marker far below the floor, out of the camera's view
+        goals = np.full((len(qpos_frames), 2), np.nan)
+    commands = [None] * len(qpos_frames) if commands is None else list(commands)
+    corners = np.vstack([qpos_frames[0, :2], np.asarray(waypoints, float).reshape(-1, 2) + env.qpos0[:2]])
+    frames = list(zip(qpos_frames[::stride], goals[::stride], commands[::stride]))
+    workers = min(workers or len(os.sched_getaffinity(0)), RENDER_WORKERS, max(len(frames) // MIN_FRAMES_PER_WORKER, 1))
+    parts = np.array_split(np.arange(len(frames)), workers)
+    draw = dict(corners=corners if waypoints else None, width=width, height=height, shadows=shadows)
+    # The encoder is an ffmpeg subprocess. JAX warns on any fork in a threaded process; subprocess's
+    # fork is followed at once by exec in C, which is safe, so that warning is noise here.
+    warnings.filterwarnings("ignore", message=r"os\.fork\(\) was called", category=RuntimeWarning)
+    with atomic.replacing(path) as tmp, imageio.get_writer(tmp, fps=1 / (env.dt * stride), codec="libx264",
+                                                            quality=7, macro_block_size=16) as writer:
+        helpers = [start_render_worker(env.mj_model, [frames[i] for i in part], draw) for part in parts[1:]]
+        for image in render_frames(env.mj_model, [frames[i] for i in parts[0]], threads=1 if helpers else 0, **draw):
+            writer.append_data(image)
+        for helper, part in zip(helpers, parts[1:]):
+            for image in finish_render_worker(helper, len(part), height, width):
+                writer.append_data(image)
+    return len(frames)
+
+
+def start_render_worker(model, frames, draw: dict) -> subprocess.Popen:
+    """A process (`python -m hexa_mjx.evaluation.render_worker`) that draws `frames` with one
+    rendering thread; its own imports are MuJoCo and NumPy only, where a spawned multiprocessing
+    worker would import the caller's script (eval.py's JAX) first."""
+    proc = subprocess.Popen([sys.executable, "-m", "hexa_mjx.evaluation.render_worker"], stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env={**os.environ, "LP_NUM_THREADS": "1"})
+    pickle.dump((model, frames, draw), proc.stdin)  # our own child reads it: no user-supplied file is unpickled
+    proc.stdin.close()
+    return proc
+
+
+def finish_render_worker(proc: subprocess.Popen, count: int, height: int, width: int) -> np.ndarray:
+    """The (count, height, width, 3) frames a render worker drew."""
+    raw = proc.stdout.read()
+    error = proc.stderr.read().decode(errors="replace")
+    if proc.wait() != 0 or len(raw) != count * height * width * 3:
+        raise RuntimeError(f"a video render worker failed (exit code {proc.returncode}): {error.strip()[-2000:]}")
+    return np.frombuffer(raw, np.uint8).reshape(count, height, width, 3)
+
+
+RENDER_WORKERS = 4  # processes that draw one video's frames at most
+MIN_FRAMES_PER_WORKER = 60  # a shorter video is drawn in one process: a worker takes about a second to start
+
+
+def render_frames(model, frames, corners=None, width=640, height=480, shadows=False, threads: int = 0) -> np.ndarray:
+    """Draw (qpos, goal or NaN, command or None) frames from the tracking camera: (N, height, width, 3)
+    uint8. `threads`: software OpenGL's rendering threads (LP_NUM_THREADS; 0: its default)."""
+    import mujoco
+
+    if threads:  # read by Mesa's llvmpipe when the context is made
+        os.environ["LP_NUM_THREADS"] = str(threads)
+    data = mujoco.MjData(model)
+    mocap = model.body_mocapid[model.body(robot.GOAL_BODY).id]
     try:
         renderer = mujoco.Renderer(model, height=height, width=width)
     except Exception as e:
@@ -46,32 +103,22 @@ def render_video(env, qpos_frames: np.ndarray, path: Path, goals: np.ndarray, wa
             f"off-screen OpenGL ({backend}) is not usable: {e}. Install it with "
             f"`apt-get install {GL_PACKAGES}` (or try MUJOCO_GL=osmesa), "
             "or pass --no-video") from e
-    corners = np.vstack([qpos_frames[0, :2], np.asarray(waypoints, float).reshape(-1, 2) + env.qpos0[:2]])
-    stride = max(int(round(1 / (env.dt * fps))), 1)
-    written = 0
-    # The encoder is an ffmpeg subprocess. JAX warns on any fork in a threaded process; subprocess's
-    # fork is followed at once by exec in C, which is safe, so that warning is noise here.
-    warnings.filterwarnings("ignore", message=r"os\.fork\(\) was called", category=RuntimeWarning)
-    with atomic.replacing(path) as tmp, imageio.get_writer(tmp, fps=1 / (env.dt * stride), codec="libx264",
-                                                            quality=7, macro_block_size=16) as writer:
-        commands = [None] * len(qpos_frames) if commands is None else commands
-        if goals is None:  # the marker far below the floor, out of the camera's view
-            goals = np.full((len(qpos_frames), 2), np.nan)
-        for qpos, goal, command in zip(qpos_frames[::stride], goals[::stride], commands[::stride]):
-            data.qpos[:] = qpos
-            data.mocap_pos[mocap] = (*qpos[:2], -10.0) if np.isnan(goal[0]) else (*goal, 0.0)
-            mujoco.mj_forward(model, data)
-            renderer.update_scene(data, camera=robot.TRACKING_CAMERA)
-            renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = shadows
-            renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = shadows
-            if waypoints:
-                draw_path(renderer.scene, corners)
-            if command is not None:
-                draw_command(renderer.scene, qpos, command)
-            writer.append_data(renderer.render())
-            written += 1
+    images = np.empty((len(frames), height, width, 3), np.uint8)
+    for k, (qpos, goal, command) in enumerate(frames):
+        data.qpos[:] = qpos
+        data.mocap_pos[mocap] = (*qpos[:2], -10.0) if np.isnan(goal[0]) else (*goal, 0.0)
+        mujoco.mj_forward(model, data)
+        renderer.update_scene(data, camera=robot.TRACKING_CAMERA)
+        renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = shadows
+        renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = shadows
+        renderer.scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = shadows
+        if corners is not None:
+            draw_path(renderer.scene, corners)
+        if command is not None:
+            draw_command(renderer.scene, qpos, command)
+        images[k] = renderer.render()
     renderer.close()
-    return written
+    return images
 
 
 def draw_path(scene, corners: np.ndarray, width=0.01, height=0.003) -> None:
@@ -146,6 +193,7 @@ def render_rates(model, qpos, frames: int = 60, repeats: int = 3, width: int = 6
                 renderer.update_scene(data, camera=robot.TRACKING_CAMERA)
                 renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = shadows
                 renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = shadows
+                renderer.scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = shadows
                 renderer.render()
             runs.append(frames / (time.perf_counter() - start))
         rates["shadows" if shadows else "plain"] = statistics.median(runs)

@@ -82,6 +82,15 @@ def draw(model: mujoco.MjModel, seed: int, ranges: Ranges, torso: int) -> dict:
     return {name: np.array(getattr(m, name)) for name in RANDOMIZED_FIELDS}
 
 
+def per_device(models, in_axes, devices: int):
+    """`randomization_fn`'s models with each per-environment field laid out (devices, environments
+    per device, ...) for pmap (`in_axes` as its in_axes); shared fields stay as they are."""
+    import jax
+
+    return jax.tree.map(lambda axis, x: x if axis is None else x.reshape((devices, -1) + x.shape[1:]), in_axes, models,
+                        is_leaf=lambda axis: axis is None)
+
+
 def randomization_fn(env, ranges: Ranges = Ranges()):
     """brax's `randomization_fn(model, rng) -> (models, in_axes)` for an environment, `rng` a
     batch of keys: one model variant per key, drawn on the host when the wrappers are built."""

@@ -6,9 +6,12 @@ Each run is a real `train.py` process (compile included, as a user sees it), giv
 seeds; configurations take turns within each seed so that machine noise falls on all of them.
 A run stops (SIGTERM, which train.py treats as Ctrl-C) at its first evaluation with success at or above
 `--target`, unless `--full` lets it finish its budget. It prints, per configuration and seed:
-wall time and env steps to that evaluation, the time to the first training update (compile),
-and a median-and-range summary. The time to the first update is read from train.py's
-"training compiled" line (absent with --no_progress). Everything is also written to `<out>/time_to_success.json`.
+wall time and env steps to that evaluation; seconds from launch to train.py's "training compiled"
+line (the first update; absent with --no_progress) and to its first evaluation row; with `--full`,
+the share of the run spent evaluating (train.py's last lines); and a median-and-range summary.
+A configuration's flags may name another checkout of hexa_mjx (`--checkout DIR`), whose train.py
+then runs: two versions side by side, e.g. `--configs fast "before=--checkout ../old --recipe fast"`.
+Everything is also written to `<out>/time_to_success.json`.
 
 `--verify 128` checks each run with eval.py afterwards (128 episodes, the run's own starts): the
 checkpoints from its first training evaluation at the target on, until one reaches the target in
@@ -39,11 +42,14 @@ CONFIGS = {
 }
 # Random starts, as the evaluations that decide success are meant to be (eval.py's perturbed starts).
 RANDOM_STARTS = ["--start_joint_noise", "0.1", "--start_yaw_noise", "0.3"]
+EVALUATION_SHARE = re.compile(r"evaluations: (\d+) took (\d+) s, (\d+)% of the run's")
+CHECKOUT = "--checkout"  # a configuration's flag: run DIR/train.py (another version of the code) instead of this one's
 FIRST_UPDATE = re.compile(r"training compiled and its first (?:update|rollout) ran in (\d+) s \((\d+) s since the start\)")
 
 
 def parse_config(text: str) -> tuple[str, list[str]]:
-    """A configuration: a name from CONFIGS, or NAME=FLAGS (e.g. "e4=--update_epochs 4")."""
+    """A configuration: a name from CONFIGS, or NAME=FLAGS (e.g. "e4=--update_epochs 4"; with
+    "--checkout DIR" among the flags, DIR's train.py runs: another version side by side)."""
     if "=" in text:
         name, flags = text.split("=", 1)
         return name, flags.split()
@@ -68,18 +74,27 @@ def first_row_at(rows: list[dict], target: float):
 
 
 def run_one(flags: list[str], run_dir: Path, target: float, full: bool, timeout_s: float) -> dict:
-    """Train once in a subprocess; stop it at its first success unless `full`."""
-    cmd = [sys.executable, str(ROOT / "train.py"), *flags, "--run_dir", str(run_dir)]
+    """Train once in a subprocess; stop it at its first success unless `full`. Times are seconds
+    from launch: to the first training update's line and to the first evaluation row's."""
+    root = ROOT
+    if CHECKOUT in flags:
+        at = flags.index(CHECKOUT)
+        root, flags = Path(flags[at + 1]).resolve(), flags[:at] + flags[at + 2:]
+    cmd = [sys.executable, str(root / "train.py"), *flags, "--run_dir", str(run_dir.resolve())]
     t0 = time.time()
     # A shell's background job ignores SIGINT, and its children inherit that: stop runs with SIGTERM,
     # which train.py handles as Ctrl-C (the last complete checkpoint is kept).
-    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    out, hit, first_update = [], None, None
+    proc = subprocess.Popen(cmd, cwd=root, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    out, hit, first_update, first_row, share = [], None, None, None, None
     for line in proc.stdout:
         out.append(line)
-        match = FIRST_UPDATE.search(line)
+        if FIRST_UPDATE.search(line) and first_update is None:
+            first_update = round(time.time() - t0, 1)
+        if line.startswith("step ") and first_row is None:
+            first_row = round(time.time() - t0, 1)
+        match = EVALUATION_SHARE.search(line)
         if match:
-            first_update = float(match.group(2))
+            share = int(match.group(3)) / 100
         if hit is None and line.startswith("step "):
             hit = first_success(run_dir / "metrics.jsonl", target)
             if hit and not full:
@@ -92,9 +107,9 @@ def run_one(flags: list[str], run_dir: Path, target: float, full: bool, timeout_
     # Seconds from the step-0 evaluation to the last one: training (first compile included) and evaluations.
     trained_s = rows[-1]["walltime_s"] - rows[0]["walltime_s"] if len(rows) > 1 else None
     return {"command": " ".join(cmd[1:]), "returncode": proc.returncode, "wall_s": time.time() - t0,
-            "first_update_s": first_update, "success_step": hit[0] if hit else None,
-            "success_wall_s": hit[1] if hit else None, "trained_s": trained_s,
-            "last": rows[-1] if rows else None, "log_tail": "".join(out[-5:])}
+            "first_update_s": first_update, "first_row_s": first_row, "evaluation_share": share,
+            "success_step": hit[0] if hit else None, "success_wall_s": hit[1] if hit else None,
+            "trained_s": trained_s, "last": rows[-1] if rows else None, "log_tail": "".join(out[-5:])}
 
 
 def evaluate_checkpoint(checkpoint: Path, episodes: int) -> dict:
@@ -148,10 +163,13 @@ def summary_line(name: str, results: list[dict]) -> str:
     times = [r["success_wall_s"] for r in results if r["success_wall_s"] is not None]
     steps = [r["success_step"] for r in results if r["success_step"] is not None]
     compiles = [r["first_update_s"] for r in results if r["first_update_s"] is not None]
+    first_rows = [r["first_row_s"] for r in results if r.get("first_row_s") is not None]
+    shares = [r["evaluation_share"] for r in results if r.get("evaluation_share") is not None]
     fmt = lambda xs, f: (f"{f(statistics.median(xs))} [{f(min(xs))}, {f(max(xs))}]" if xs else "-")  # noqa: E731
     return (f"{name:<12} reached {len(times)}/{len(results)}  wall time to success, median [range] "
             f"{fmt(times, lambda x: f'{x / 60:.1f} min')}  env steps {fmt(steps, lambda x: f'{x / 1e6:.2f}M')}  "
-            f"time to the first update {fmt(compiles, lambda x: f'{x:.0f} s')}")
+            f"from launch: first update {fmt(compiles, lambda x: f'{x:.0f} s')}, first evaluation row "
+            f"{fmt(first_rows, lambda x: f'{x:.0f} s')}, evaluating {fmt(shares, lambda x: f'{x:.0%}')} of a whole run")
 
 
 def verified_summary_line(name: str, results: list[dict]) -> str:
@@ -223,9 +241,10 @@ def main(argv=None) -> int:
             results[name].append({"seed": seed, **r})
             got = (f"{r['success_wall_s'] / 60:.1f} min, {r['success_step']:,} steps" if r["success_step"] is not None
                    else "not reached")
-            print(f"{name} seed {seed}: success >= {args.target:.0%} at {got}; first update after "
-                  f"{r['first_update_s']} s; step-0 to last evaluation {r['trained_s']} s; "
-                  f"run {r['wall_s'] / 60:.1f} min", flush=True)
+            share = f"{r['evaluation_share']:.0%}" if r["evaluation_share"] is not None else "-"
+            print(f"{name} seed {seed}: success >= {args.target:.0%} at {got}; from launch: first update "
+                  f"{r['first_update_s']} s, first evaluation row {r['first_row_s']} s; step-0 to last evaluation "
+                  f"{r['trained_s']} s; run {r['wall_s'] / 60:.1f} min, evaluating {share} of it", flush=True)
     (out / "time_to_success.json").write_text(json.dumps(results, indent=1))
     if args.verify:
         print(f"\nverifying with eval.py, {args.verify} episodes per checkpoint")

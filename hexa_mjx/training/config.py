@@ -136,7 +136,7 @@ class TrainConfig:
     num_evals: int = field(RUN, 10, "evaluations (and checkpoints) over the run")
     num_eval_envs: int = field(RUN, 32, "episodes per evaluation (deterministic policy)")
     eval_at_start: bool = field(RUN, True, "evaluate the untrained params before the first update, as brax does "
-                                "(--no_eval_at_start: skip it; it runs about 30 s on a 2-core CPU)")
+                                "(--no_eval_at_start: skip it; with its compile it takes about a minute on a 2-core CPU)")
     progress: bool = field(RUN, True, "a console line every 15 s between evaluations and one when training has "
                            "compiled (--no_progress: off; it costs under 1%% of training time in the median, "
                            "docs/RESULTS.md)")

@@ -7,6 +7,7 @@ kills the run the N-th time (default 1st) it reaches the point NAME (with `:TERM
 SIGTERM instead, as a scheduler preempting it would; with `:ENOSPC`, fails there as a full disk
 would, with OSError 28):
 
+- `compiling`: the training programs are about to compile (before the first update);
 - `training-started`: after the step-0 evaluation, before the first checkpoint;
 - `row-written`: an evaluation's row written to metrics.jsonl, its checkpoint not yet saved;
 - `checkpoint-writing`: a checkpoint's files written into its temporary folder, not yet renamed;
@@ -23,7 +24,7 @@ import os
 import signal
 
 VARIABLE = "HEXA_MJX_KILL_AT"
-POINTS = ("training-started", "row-written", "checkpoint-writing", "checkpoint-saved", "update-done")
+POINTS = ("compiling", "training-started", "row-written", "checkpoint-writing", "checkpoint-saved", "update-done")
 _reached: dict[str, int] = {}
 
 

@@ -66,12 +66,16 @@ def init_params(cfg: TrainConfig, env):
     return normalizer, nets.policy_network.init(key_policy), nets.value_network.init(key_value)
 
 
-def make_inference(cfg: TrainConfig, env, params, deterministic=True):
-    """A policy function obs -> action from saved params."""
+def policy_maker(cfg: TrainConfig, env):
+    """brax's `make_policy(params, deterministic)` for the config's networks."""
     from brax.training.agents.ppo import networks as ppo_networks
 
-    make_policy = ppo_networks.make_inference_fn(make_networks(cfg, env))
-    policy = make_policy(params, deterministic=deterministic)
+    return ppo_networks.make_inference_fn(make_networks(cfg, env))
+
+
+def make_inference(cfg: TrainConfig, env, params, deterministic=True):
+    """A policy function obs -> action from saved params."""
+    policy = policy_maker(cfg, env)(params, deterministic=deterministic)
     return lambda obs, key: policy(obs, key)[0]
 
 
@@ -157,9 +161,10 @@ def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
     """`train`'s run of a validated config, by the process that holds the run directory (`main`)
     or another process of a multi-process run."""
     run_dir = Path(cfg.run_dir)
-    # The curriculum shapes the training environment only: evaluations see the full task.
+    # The curriculum shapes the training environment only: evaluations see the full task. The
+    # evaluation's own environment object is traced on the evaluator's compile thread.
     env = make_env_for(cfg, curriculum_levels=cfg.curriculum_levels)
-    eval_env = make_env_for(cfg) if cfg.curriculum_levels else env
+    eval_env = make_env_for(cfg)
     template = init_params(cfg, env)
     optimizer_template = adam_template(template)
     start_step, restore, optimizer, position, logged = 0, None, None, None, set()
@@ -193,7 +198,8 @@ def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
     # that row is missing (a crash between the two, or a run from before rows were written first).
     evaluate_start = start_step not in logged and (cfg.eval_at_start or start_step > 0) and not position
     randomization_fn = randomization.randomization_fn(env) if cfg.randomize else None
-    evaluator = RunEvaluator(eval_env, wrap_env_fn(env, cfg.randomize), randomization_fn, cfg.num_eval_envs,
+    evaluator = RunEvaluator(eval_env, wrap_env_fn(eval_env, cfg.randomize), randomization_fn,
+                             policy_maker(cfg, eval_env), template, cfg.num_eval_envs,
                              cfg.episode_length, seed=cfg.seed + offset,
                              done=position["evaluations"] if position else 0) if main else None
 
@@ -205,7 +211,7 @@ def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
         if first and not evaluate_start:
             return
         logger.evaluating()
-        metrics = evaluator(make_policy, params)
+        metrics = evaluator(params)
         # Where the curriculum's environments are (levels restart at 0 on resume), and the failure schedule.
         if cfg.curriculum_levels:
             metrics.update(level_summary(env_state.info["level"], cfg.curriculum_levels))
@@ -223,8 +229,15 @@ def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
             on_eval(logger.last)
 
     def on_update(step, env_state):
-        logger.progress(offset + step, lambda: mean_last_return(env_state))
-        faults.point("update-done")
+        if isinstance(stop, exact.Preemption):
+            stop.trained()  # from here a stop saves a checkpoint
+        if not main:
+            return
+        # The training programs have compiled and run: the evaluation's compiles beside training.
+        evaluator.compile_in_background()
+        if cfg.progress:
+            logger.progress(offset + step, lambda: mean_last_return(env_state))
+            faults.point("update-done")
 
     def on_stop(step, params, adam, at):  # asked to stop: a checkpoint here, then out
         path = save_checkpoint(run_dir, offset + step, params, adam, saved(at)) if main else None
@@ -238,6 +251,7 @@ def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
           f"{cfg.steps_per_update:,} steps per update -> {run_dir}", flush=True)
     if logger:
         logger.compiling(evaluation_first=evaluate_start)
+    faults.point("compiling")
     settings = (ppo_settings(cfg, cfg.num_timesteps, cfg.num_evals, cfg.seed, devices) if position else
                 ppo_settings(cfg, remaining, evals_for(cfg, remaining), cfg.seed + start_step, devices))
     ppo.train(env, settings, network_factory(cfg),
@@ -246,7 +260,7 @@ def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
               randomization_fn=randomization_fn, restore_params=restore, restore_adam=optimizer,
               anneal_lr=(offset, cfg.num_timesteps) if cfg.anneal_lr else None,
               on_interval=on_interval if main else None,
-              on_update=on_update if main and cfg.progress else None, resume=position, stop=stop, on_stop=on_stop)
+              on_update=on_update, resume=position, stop=stop, on_stop=on_stop)
     total = time.time() - t0
     if logger is None:
         print(f"process {jax.process_index()} done: {remaining:,} steps in {total / 60:.1f} min")

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import threading
 from typing import Callable
 
 import jax
@@ -196,6 +197,7 @@ def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=No
     if process_id == 0 and on_interval is not None:
         host = host_params()
         on_interval(step, make_policy, host[:3], host[3], env_state, position(first_interval, first_update, None))
+    compiled = False
     for interval in range(first_interval, intervals):
         if resume is not None and interval == first_interval and resume.get("key") is not None:
             key = jp.asarray(resume["key"])  # stopped within this interval: its keys as they were
@@ -203,6 +205,8 @@ def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=No
             epoch_key, local_key = jax.random.split(local_key)
             key = jax.random.split(epoch_key, len(devices))
         for done in range(first_update if interval == first_interval else 0, updates_per_interval):
+            if not compiled:  # the first update compiles: on a thread, so that a signal is answered meanwhile
+                update, compiled = compile_aside(update, state, env_state, key), True
             state, env_state, key = update(state, env_state, key)
             step += steps_per_update
             if on_update is not None:
@@ -222,6 +226,28 @@ def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=No
     pmap.assert_is_replicated(state)
     pmap.synchronize_hosts()
     return jax.tree.map(np.asarray, unpmap((state.normalizer_params, state.params.policy, state.params.value)))
+
+
+def compile_aside(fn, *args):
+    """`fn` (jitted or pmapped) compiled for `args` on a worker thread, while this thread waits in
+    short joins: XLA's compile holds the thread that runs it for up to a minute, and Python
+    answers a signal (train.py's SIGTERM) only between its own bytecodes. The same program as
+    `fn(*args)` would compile, from the same cache."""
+    result = {}
+
+    def work():
+        try:
+            result["compiled"] = fn.lower(*args).compile()
+        except Exception as e:  # noqa: BLE001 - raised again on the caller's thread
+            result["error"] = e
+
+    worker = threading.Thread(target=work, daemon=True)  # daemon: a stop during the compile does not wait for it
+    worker.start()
+    while worker.is_alive():
+        worker.join(0.1)
+    if "error" in result:
+        raise result["error"]
+    return result["compiled"]
 
 
 def make_optimizer(settings: PPOSettings):

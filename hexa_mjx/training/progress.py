@@ -97,6 +97,10 @@ class RowWriteError(OSError):
     """An evaluation row could not be written."""
 
 
+# Row fields that time the run rather than describe the policy: they differ between identical runs.
+TIMING_FIELDS = ("walltime_s", "evaluation_s", "env_steps_per_s")
+
+
 class Logger:
     """metrics.jsonl rows, TensorBoard scalars and one console line per evaluation; between
     evaluations a progress line at least every PROGRESS_INTERVAL_S, and lines that say when the
@@ -157,7 +161,9 @@ class Logger:
         elapsed = time.time() - self.t0
         done = step - self.start_step
         rate = done / elapsed if done > 0 and elapsed > 0 else math.nan
-        row = {"step": step, "walltime_s": round(elapsed, 2), "env_steps_per_s": rate, **summarize(metrics),
+        evaluation_s = time.time() - self.this_evaluation_t0 if self.this_evaluation_t0 is not None else math.nan
+        row = {"step": step, "walltime_s": round(elapsed, 2), "evaluation_s": round(evaluation_s, 2),
+               "env_steps_per_s": rate, **summarize(metrics),
                **{k: float(v) for k, v in metrics.items()
                   if k.startswith(("eval/episode_reward/", "curriculum/", "leg_failure/"))}}
         try:

@@ -11,7 +11,8 @@ multi-process run) resumes as before: the same training continued from new keys 
 episodes, which the resume says.
 
 SIGTERM and SIGINT (`Preemption`) stop the run at the next update boundary; the run then writes a
-checkpoint with its position and exits with EXIT_CODE (`train.py`).
+checkpoint with its position and exits with EXIT_CODE (`train.py`). Before the first update
+(loading, compiling, the step-0 evaluation) they stop it at once: nothing new would be saved.
 """
 
 from __future__ import annotations
@@ -32,24 +33,37 @@ class Preempted(Exception):
         self.step, self.path = step, path
 
 
+class StoppedBeforeTraining(Exception):
+    """Asked to stop before the run's first update had run (loading, compiling, the step-0
+    evaluation): there was nothing new to save, so it stopped at once."""
+
+
 class Preemption:
-    """A stop asked for by SIGTERM or SIGINT, answered at the next update boundary. A second
-    signal while compiling or evaluating (where no update boundary comes soon) stops at once,
-    keeping the last complete checkpoint."""
+    """A stop asked for by SIGTERM or SIGINT. Before the run's first update (`trained` not yet
+    called) it stops at once, raising `StoppedBeforeTraining`: the compile can take a minute and
+    there is nothing to save. After it, at the next update boundary, with a checkpoint. A second
+    signal stops at once, keeping the last complete checkpoint."""
 
     def __init__(self):
-        self.asked = False
+        self.asked, self.nothing_to_save = False, True
 
     def install(self) -> "Preemption":
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, self._handle)
         return self
 
+    def trained(self) -> None:
+        """An update has run: a stop now waits for the next update boundary and saves."""
+        self.nothing_to_save = False
+
     def _handle(self, signum, frame):
         if self.asked:
             raise KeyboardInterrupt
         self.asked = True
-        print(f"\n{signal.Signals(signum).name}: stopping at the next update with a checkpoint "
+        name = signal.Signals(signum).name
+        if self.nothing_to_save:
+            raise StoppedBeforeTraining(name)
+        print(f"\n{name}: stopping at the next update with a checkpoint "
               "(send it again to stop at once, keeping the last complete checkpoint)", flush=True)
 
     def __call__(self) -> bool:
