@@ -109,9 +109,7 @@ def render_frames(model, frames, corners=None, width=640, height=480, shadows=Fa
         data.mocap_pos[mocap] = (*qpos[:2], -10.0) if np.isnan(goal[0]) else (*goal, 0.0)
         mujoco.mj_forward(model, data)
         renderer.update_scene(data, camera=robot.TRACKING_CAMERA)
-        renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = shadows
-        renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = shadows
-        renderer.scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = shadows
+        set_effects(renderer.scene, shadows)
         if corners is not None:
             draw_path(renderer.scene, corners)
         if command is not None:
@@ -119,6 +117,14 @@ def render_frames(model, frames, corners=None, width=640, height=480, shadows=Fa
         images[k] = renderer.render()
     renderer.close()
     return images
+
+
+def set_effects(scene, on: bool) -> None:
+    """Shadows, skybox and the floor's reflection on or off (costly in software OpenGL)."""
+    import mujoco
+
+    for flag in (mujoco.mjtRndFlag.mjRND_SHADOW, mujoco.mjtRndFlag.mjRND_SKYBOX, mujoco.mjtRndFlag.mjRND_REFLECTION):
+        scene.flags[flag] = on
 
 
 def draw_path(scene, corners: np.ndarray, width=0.01, height=0.003) -> None:
@@ -191,9 +197,7 @@ def render_rates(model, qpos, frames: int = 60, repeats: int = 3, width: int = 6
             start = time.perf_counter()
             for _ in range(frames):
                 renderer.update_scene(data, camera=robot.TRACKING_CAMERA)
-                renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = shadows
-                renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = shadows
-                renderer.scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = shadows
+                set_effects(renderer.scene, shadows)
                 renderer.render()
             runs.append(frames / (time.perf_counter() - start))
         rates["shadows" if shadows else "plain"] = statistics.median(runs)

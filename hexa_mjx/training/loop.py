@@ -162,9 +162,9 @@ def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
     or another process of a multi-process run."""
     run_dir = Path(cfg.run_dir)
     # The curriculum shapes the training environment only: evaluations see the full task. The
-    # evaluation's own environment object is traced on the evaluator's compile thread.
+    # evaluation's own environment object (process 0's) is traced on the evaluator's compile thread.
     env = make_env_for(cfg, curriculum_levels=cfg.curriculum_levels)
-    eval_env = make_env_for(cfg)
+    eval_env = make_env_for(cfg) if main else env
     template = init_params(cfg, env)
     optimizer_template = adam_template(template)
     start_step, restore, optimizer, position, logged = 0, None, None, None, set()
