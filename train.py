@@ -49,7 +49,10 @@ def run(cfg, preemption) -> int:
     """train.py for a parsed config: errors as one line and an exit code."""
     jax_setup.prepare_jax(cfg.cpu_devices, cfg.compile_cache)  # before anything starts JAX
     try:
-        distributed.initialize(cfg.coordinator, cfg.num_processes, cfg.process_id, cfg.coordinator_timeout)
+        if distributed.initialize(cfg.coordinator, cfg.num_processes, cfg.process_id, cfg.coordinator_timeout):
+            # jax.distributed takes SIGTERM for its own preemption notifier; ours answers it as in a
+            # one-process run, and the processes agree on the stop at the next update.
+            preemption.install()
     except distributed.DistributedError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
@@ -68,7 +71,7 @@ def run(cfg, preemption) -> int:
     except RunLocked as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    except (CheckpointWriteError, RowWriteError) as e:
+    except (CheckpointWriteError, RowWriteError, distributed.WaitedTooLong) as e:
         print(f"error: {e}", file=sys.stderr)
         return 1
     except resume.Preempted as e:

@@ -79,6 +79,7 @@ TRAIN_CASES = [
     (["--model", "nowhere.xml"], "--model nowhere.xml is not a file"),
     (["--num_processes", "2", "--process_id", "5", "--coordinator", "localhost:1"], "--process_id must be in 0..1"),
     (["--num_processes", "2"], "needs --coordinator HOST:PORT"),
+    (["--process_wait_timeout", "0"], "--process_wait_timeout must be positive seconds"),
     (["--policy_dist", "beta"], "invalid choice: 'beta'"),
     (["--terrain", "lava"], "invalid choice: 'lava'"),
     (["--terrain", "bumps", "--terrain_difficulty", "2"], "terrain_difficulty is a fraction from 0 to 1"),

@@ -126,6 +126,35 @@ def test_kills_and_sigterms_resume_bit_for_bit(tmp_path, cache_env):
         np.testing.assert_array_equal(x, y)  # the final params, bit for bit
 
 
+def test_two_processes_wait_for_a_slow_evaluation_and_resume_bit_for_bit(tmp_path, cache_env):
+    """Process 0's step-192 evaluation made 40 s slow, longer than the 30 s a collective's transport
+    waits: the other process waits at a barrier instead. A SIGTERM to process 0 alone stops both at
+    the same update with one checkpoint of both processes' positions; the resume continues exactly."""
+    whole, stopped = tmp_path / "whole", tmp_path / "stopped"
+
+    def both(run_dir, point=None, *extra):
+        env = {**cache_env, **({faults.VARIABLE: point} if point else {})}
+        return train_processes([[*EXACT, "--run_dir", str(run_dir), "--cpu_devices", "1", *extra, *flags]
+                                for flags in process_flags(free_port())], env)
+
+    results = both(whole, "evaluated@2:SLEEP40")  # the second evaluation: step 192
+    assert [r[0] for r in results] == [0, 0], results
+    results = both(stopped, "update-done@2:TERM")  # SIGTERM to process 0 only (it alone reports progress)
+    assert [r[0] for r in results] == [143, 143], results
+    assert [s for s, _ in checkpoints.list_checkpoints(stopped)] == [128]
+    results = both(stopped, None, "--resume")
+    assert [r[0] for r in results] == [0, 0], results
+    assert "from step 128: exactly" in results[0][1], results[0][1]
+
+    assert comparable(stopped) == comparable(whole)  # every row, bit for bit
+    cfg = config.load_config(whole)
+    template = training.init_params(cfg, config.make_env_for(cfg))
+    (_, a), (_, b) = (checkpoints.load_checkpoint(checkpoints.list_checkpoints(r)[-1][1], template)
+                      for r in (whole, stopped))
+    for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)):
+        np.testing.assert_array_equal(x, y)  # the final params, bit for bit
+
+
 def test_a_stop_before_the_first_update_is_at_once(tmp_path, cache_env):
     """SIGTERM as the training programs start compiling: nothing to save, so no wait for the compile."""
     run_dir = tmp_path / "run"

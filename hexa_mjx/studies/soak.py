@@ -1,6 +1,6 @@
 """Soak: hostile actions for millions of env steps, and a training run killed again and again.
 
-    python -m hexa_mjx.studies.soak [--env_steps 10000000] [--kills 20] [--out runs/soak] [--seed 0]
+    python -m hexa_mjx.studies.soak [--env_steps 10000000] [--kills 20] [--terms 5] [--out runs/soak] [--seed 0]
 
 Not a unit test: about an hour on a 2-core CPU (runs/soak took 27 min for the actions, 33 for the
 kills). Two parts, each skippable:
@@ -11,13 +11,15 @@ kills). Two parts, each skippable:
    rewards (the target is none), and the episodes that ended on a non-finite physics state.
 2. **Kills** (`--kills`): a small training run (`--train_args`, by default the fast preset for
    1.97M steps) first runs uninterrupted; then the same run is started in another folder, killed
-   with SIGKILL after a random delay and resumed, until `--kills` kills have landed, then resumed
-   to the end. Each delay is uniform between 0 and the uninterrupted run's time to its second
+   with SIGKILL after a random delay and resumed, until `--kills` kills have landed, then stopped
+   with SIGTERM (a scheduler's preemption) `--terms` times the same way, then resumed to the end.
+   Each delay is uniform between 0 and the uninterrupted run's time to its second
    checkpoint (plus imports), so a kill lands anywhere: importing, compiling, training,
    evaluating, writing a checkpoint. Checks: every evaluation row exactly once and one per
    checkpoint, every checkpoint readable, no `tmp-*` left, Adam's step count at every checkpoint
-   equal to the updates trained up to it; reports the final parameters' and evaluation's
-   difference from the uninterrupted run (the resume gap, docs/RESULTS.md "Reliability").
+   equal to the updates trained up to it, each SIGTERM answered with exit code 143 within the
+   grace period; and whether the rows (but for their clock fields) and every final parameter,
+   normalizer and Adam's state included, are bit-identical to the uninterrupted run's.
 
 Writes `<out>/soak.json` (a skipped part keeps its earlier figures); prints a summary. A finished
 run directory is reused.
@@ -43,6 +45,7 @@ ROOT = Path(__file__).resolve().parents[2]
 # budget on this grid keeps every resumed run's evaluations on the uninterrupted run's steps.
 DEFAULT_TRAIN = "--preset fast --num_timesteps 1966080 --num_evals 31 --start_joint_noise 0.1"
 IMPORT_S = 10.0  # train.py's start before its run clock: imports, model compile
+GRACE_S = 30.0  # s: the grace period a scheduler gives between SIGTERM and SIGKILL (docs/RELIABILITY.md)
 
 
 def hostile_actions(key, num_envs: int, action_size: int):
@@ -126,11 +129,14 @@ def finished(run_dir: Path, args: list[str]) -> bool:
 
 
 # Long by design: one scenario (train, kill at random, resume, compare) read top to bottom.
-def soak_kills(kills: int, train_args: list[str], out: Path, seed: int) -> dict:
-    """The uninterrupted run, then the same run killed `kills` times and resumed; see the module doc."""
+def soak_kills(kills: int, terms: int, train_args: list[str], out: Path, seed: int) -> dict:
+    """The uninterrupted run, then the same run killed `kills` times and stopped by SIGTERM `terms`
+    times, resumed after each; see the module doc."""
     import jax
 
     from hexa_mjx.training import checkpoints, config, optimizer_state, loop as training
+    from hexa_mjx.training.progress import TIMING_FIELDS
+    from hexa_mjx.training.resume import EXIT_CODE
 
     whole, killed = out / "uninterrupted", out / "killed"
     if not finished(whole, train_args):
@@ -143,23 +149,32 @@ def soak_kills(kills: int, train_args: list[str], out: Path, seed: int) -> dict:
     longest = IMPORT_S + reference[2]["walltime_s"]
 
     rng = random.Random(seed)
-    attempts, landed, t0 = [], 0, time.time()
-    while landed < kills and not finished(killed, train_args):
+    attempts, landed, stopped, t0 = [], 0, 0, time.time()
+    while landed + stopped < kills + terms and not finished(killed, train_args):
+        how = signal.SIGKILL if landed < kills else signal.SIGTERM
         resume = (killed / "config.json").is_file()
         proc = subprocess.Popen(train_command(train_args, killed, resume), stdout=subprocess.PIPE,
                                 stderr=subprocess.STDOUT, text=True)
-        delay = rng.uniform(0, longest)
+        delay, answered_s = rng.uniform(0, longest), None
         try:
             output = proc.communicate(timeout=delay)[0]
         except subprocess.TimeoutExpired:
-            proc.send_signal(signal.SIGKILL)
-            output = proc.communicate()[0]
+            proc.send_signal(how)
+            sent = time.time()
+            try:  # a scheduler kills a job that outlives its grace period
+                output = proc.communicate(timeout=GRACE_S if how == signal.SIGTERM else None)[0]
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                output = proc.communicate()[0]
+            answered_s = round(time.time() - sent, 1)
         resumed = [line for line in output.splitlines() if line.startswith(("resuming", "removed", "warning"))]
-        attempts.append({"delay_s": round(delay, 1), "returncode": proc.returncode, "log": resumed})
-        landed += proc.returncode == -signal.SIGKILL
+        attempts.append({"signal": signal.Signals(how).name, "delay_s": round(delay, 1),
+                         "returncode": proc.returncode, "answered_s": answered_s, "log": resumed})
+        landed += proc.returncode == -signal.SIGKILL and how == signal.SIGKILL
+        stopped += answered_s is not None and how == signal.SIGTERM
         found = checkpoints.list_checkpoints(killed)
-        print(f"  attempt {len(attempts)}: {'killed' if proc.returncode == -signal.SIGKILL else 'finished'} after "
-              f"{delay:5.1f} s; latest checkpoint {found[-1][0] if found else 0:,}", flush=True)
+        print(f"  attempt {len(attempts)}: {'finished' if answered_s is None else signal.Signals(how).name} after "
+              f"{delay:5.1f} s (exit {proc.returncode}); latest checkpoint {found[-1][0] if found else 0:,}", flush=True)
     subprocess.run(train_command(train_args, killed, resume=True), check=True, stdout=subprocess.DEVNULL)
     killed_s = time.time() - t0
 
@@ -180,21 +195,34 @@ def soak_kills(kills: int, train_args: list[str], out: Path, seed: int) -> dict:
     finals = [checkpoints.list_checkpoints(whole)[-1][1], saved[-1][1]]
     (_, a), (_, b) = (checkpoints.load_checkpoint(p, template) for p in finals)
     adam_a, adam_b = (checkpoints.load_optimizer(p, adam_template) for p in finals)
-    flat = lambda params: np.concatenate([np.ravel(x) for x in jax.tree.leaves(params[1])])  # noqa: E731
+    flat = lambda tree: np.concatenate([np.ravel(x) for x in jax.tree.leaves(tree)])  # noqa: E731
     killed_rows = rows(killed)
     steps_whole, steps_killed = [r["step"] for r in reference], [r["step"] for r in killed_rows]
     last_a, last_b = reference[-1], killed_rows[-1]
+    clockless = lambda rs: [{k: v for k, v in r.items() if k not in TIMING_FIELDS} for r in rs]  # noqa: E731
+    # NaN != NaN in Python: compare the rows as JSON text, which writes NaN the same way each time.
+    same_rows = json.dumps(clockless(reference), sort_keys=True) == json.dumps(clockless(killed_rows), sort_keys=True)
+    terms_sent = [a for a in attempts if a["signal"] == "SIGTERM" and a["answered_s"] is not None]
     return {
-        "train_args": train_args, "kills_delivered": landed,
+        "train_args": train_args, "kills_delivered": landed, "terms_delivered": stopped,
         "attempts": attempts, "kill_delay_max_s": round(longest, 1),
         # Each evaluation once, one per checkpoint (and step 0), on the uninterrupted run's steps.
         "rows_each_once": len(set(steps_killed)) == len(steps_killed) and set(steps_killed) == {0, *(s for s, _ in saved)},
         "same_steps_as_uninterrupted": steps_killed == steps_whole, "rows": len(steps_killed),
+        "rows_bit_identical": same_rows,
+        "params_bit_identical": bool(np.array_equal(flat(a), flat(b))),
+        "adam_state_bit_identical": bool(np.array_equal(flat(adam_a), flat(adam_b))),
+        # 143: stopped as asked; -15: the signal's default action, before train.py's imports had
+        # installed its handler (nothing trained yet); 0: the run had finished its last update.
+        "term_exit_codes": sorted(a["returncode"] for a in terms_sent),
+        "terms_answered_within_grace": all(a["returncode"] in (EXIT_CODE, -signal.SIGTERM, 0)
+                                           and a["answered_s"] <= GRACE_S for a in terms_sent),
+        "term_answer_s_max": max((a["answered_s"] for a in terms_sent), default=None),
         "adam_counts_continue": adam_counts_continue,
         "checkpoints": len(saved), "unreadable_checkpoints": unreadable,
         "tmp_left": len(list((killed / "checkpoints").glob("tmp-*"))),
         "adam_count": [int(adam_a[0].count), int(adam_b[0].count)],
-        "policy_param_relative_difference": float(np.linalg.norm(flat(a) - flat(b)) / np.linalg.norm(flat(a))),
+        "policy_param_relative_difference": float(np.linalg.norm(flat(a[1]) - flat(b[1])) / np.linalg.norm(flat(a[1]))),
         "final_evaluation": {key: [last_a.get(key), last_b.get(key)] for key in
                              ("step", "success_rate", "final_distance", "episode_return", "fall_rate")},
         "killed_run_total_s": round(killed_s, 1),
@@ -206,14 +234,15 @@ def main(argv=None) -> None:
     parser.add_argument("--env_steps", type=int, default=10_000_000, help="hostile-action env steps (0 skips)")
     parser.add_argument("--num_envs", type=int, default=256, help="environments stepped together")
     parser.add_argument("--kills", type=int, default=20, help="SIGKILLs of the training run (0 skips)")
+    parser.add_argument("--terms", type=int, default=5, help="SIGTERMs of the training run, after the SIGKILLs")
     parser.add_argument("--train_args", default=DEFAULT_TRAIN, help="train.py flags of the killed run")
     parser.add_argument("--out", type=Path, default=Path("runs/soak"), help="folder for the runs and soak.json")
     parser.add_argument("--seed", type=int, default=0, help="seed of the actions and of the kill delays")
     args = parser.parse_args(argv)
-    if args.env_steps < 0 or args.kills < 0 or args.num_envs < 1:
-        parser.error("--env_steps and --kills must be >= 0 and --num_envs >= 1")
+    if min(args.env_steps, args.kills, args.terms) < 0 or args.num_envs < 1:
+        parser.error("--env_steps, --kills and --terms must be >= 0 and --num_envs >= 1")
     train_args = shlex.split(args.train_args)
-    if args.kills:
+    if args.kills or args.terms:
         from hexa_mjx.training import config
 
         try:
@@ -229,9 +258,9 @@ def main(argv=None) -> None:
         print(f"actions: {args.env_steps:,} env steps on {args.num_envs} environments", flush=True)
         report["actions"] = soak_actions(args.env_steps, args.num_envs, args.seed)
         print(json.dumps(report["actions"]), flush=True)
-    if args.kills:
-        print(f"kills: {args.kills} SIGKILLs of train.py {args.train_args}", flush=True)
-        report["kills"] = soak_kills(args.kills, train_args, args.out, args.seed)
+    if args.kills or args.terms:
+        print(f"kills: {args.kills} SIGKILLs and {args.terms} SIGTERMs of train.py {args.train_args}", flush=True)
+        report["kills"] = soak_kills(args.kills, args.terms, train_args, args.out, args.seed)
         print(json.dumps({k: v for k, v in report["kills"].items() if k != "attempts"}), flush=True)
     path.write_text(json.dumps(report, indent=2))
     print(f"wrote {path}")

@@ -72,6 +72,8 @@ def validate(cfg: TrainConfig, writes: bool = True) -> TrainConfig:
     rewards.make_scales(task.rewards[cfg.reward], cfg.ablate, reward_overrides(cfg), task.terms)
     check_ranges(cfg)
     distributed.check(cfg.coordinator, cfg.num_processes, cfg.process_id, cfg.coordinator_timeout)
+    if not cfg.process_wait_timeout > 0:
+        raise ConfigError(f"--process_wait_timeout must be positive seconds, got {cfg.process_wait_timeout}")
     trajectories = cfg.batch_size * cfg.num_minibatches
     if cfg.num_envs < 1 or trajectories % cfg.num_envs:
         fits = [n for n in (8, 16, 32, 64, 128, 256, 512, 1024, 2048, 4096) if trajectories % n == 0]

@@ -157,6 +157,9 @@ class TrainConfig:
                             "run directory")
     coordinator_timeout: float = field(SCALE_OUT, 120.0, "multi-process training: s to wait for the coordinator and "
                                        "for every process to join")
+    process_wait_timeout: float = field(SCALE_OUT, 3600.0, "multi-process training: s the other processes wait "
+                                        "for what process 0 does alone (reading the run directory, an evaluation, "
+                                        "a checkpoint) before giving up")
 
     @property
     def steps_per_update(self) -> int:
@@ -165,7 +168,8 @@ class TrainConfig:
 
 # Settings that may change on --resume without making it a different run.
 RESUMABLE = {"num_timesteps", "num_evals", "resume", "run_dir", "cpu_devices", "compile_cache", "progress",
-             "eval_at_start", "record_optimizer", "coordinator", "num_processes", "process_id", "coordinator_timeout"}
+             "eval_at_start", "record_optimizer", "coordinator", "num_processes", "process_id", "coordinator_timeout",
+             "process_wait_timeout"}
 # Settings that may differ between the processes of one multi-process run.
 PER_PROCESS = {"process_id", "compile_cache", "progress"}
 FIELDS = {f.name for f in dataclasses.fields(TrainConfig)}

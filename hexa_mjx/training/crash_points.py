@@ -5,9 +5,11 @@ moment of a training run.
 
 kills the run the N-th time (default 1st) it reaches the point NAME (with `:TERM`, sends it
 SIGTERM instead, as a scheduler preempting it would; with `:ENOSPC`, fails there as a full disk
-would, with OSError 28):
+would, with OSError 28; with `:SLEEP<s>`, only waits there for s seconds, as a slow evaluation on a
+busy machine would):
 
 - `compiling`: the training programs are about to compile (before the first update);
+- `evaluated`: process 0 has run an evaluation, its row not yet written;
 - `training-started`: after the step-0 evaluation, before the first checkpoint;
 - `row-written`: an evaluation's row written to metrics.jsonl, its checkpoint not yet saved;
 - `checkpoint-writing`: a checkpoint's files written into its temporary folder, not yet renamed;
@@ -22,9 +24,10 @@ from __future__ import annotations
 import errno
 import os
 import signal
+import time
 
 VARIABLE = "HEXA_MJX_KILL_AT"
-POINTS = ("compiling", "training-started", "row-written", "checkpoint-writing", "checkpoint-saved", "update-done")
+POINTS = ("compiling", "evaluated", "training-started", "row-written", "checkpoint-writing", "checkpoint-saved", "update-done")
 _reached: dict[str, int] = {}
 
 
@@ -40,6 +43,9 @@ def point(name: str) -> None:
         return
     _reached[name] = _reached.get(name, 0) + 1
     if _reached[name] == int(nth or 1):
+        if how.startswith("SLEEP"):
+            time.sleep(float(how[len("SLEEP"):]))
+            return
         if how == "ENOSPC":
             raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
         os.kill(os.getpid(), signal.SIGTERM if how == "TERM" else signal.SIGKILL)

@@ -6,12 +6,16 @@ evaluates on process 0 only. Process 0 alone writes the run directory. Under SLU
 JAX finds the coordinator, process count and id itself when the flags are absent.
 
 JAX aborts the whole process (no Python exception) when it cannot reach the coordinator, so the
-checks here run first and turn the common mistakes into one `error:` line.
+checks here run first and turn the common mistakes into one `error:` line. For the same reason the
+other processes never wait for process 0's solo work (reading the run directory, an evaluation, a
+checkpoint) inside a collective, whose transport gives up after 30 s: they wait at a named barrier
+of the coordinator (`wait_for_main`) for as long as `--process_wait_timeout` allows.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import io
 import os
 import socket
 import time
@@ -168,3 +172,53 @@ def share(tree):
     if jax.process_count() == 1:
         return tree
     return multihost_utils.broadcast_one_to_all(tree, is_source=is_main())
+
+
+class WaitedTooLong(RuntimeError):
+    """A process waited longer than --process_wait_timeout for process 0's solo work."""
+
+
+def wait_for_main(what: str, timeout_s: float) -> None:
+    """Every process waits here until process 0 has arrived too, after doing `what` alone (its
+    evaluation, a checkpoint), for up to `timeout_s`; WaitedTooLong names what it waited for."""
+    import jax
+
+    if jax.process_count() == 1:
+        return
+    from orbax.checkpoint import multihost
+
+    try:
+        multihost.get_barrier_sync_fn()(key=f"hexa_mjx: {what}", timeout_ms=int(timeout_s * 1000))
+    except Exception as e:  # the coordinator's DEADLINE_EXCEEDED, or a process gone
+        raise WaitedTooLong(f"process {jax.process_index()} waited {timeout_s:g} s for process 0's {what} "
+                            f"({type(e).__name__}: {str(e).splitlines()[0][:160]}); if process 0 is still "
+                            "working, raise --process_wait_timeout") from None
+
+
+def any_process(flag: bool) -> bool:
+    """Whether `flag` is true on any process (every process calls it at the same point)."""
+    import jax
+    from jax.experimental import multihost_utils
+
+    if jax.process_count() == 1:
+        return bool(flag)
+    return bool(np.asarray(multihost_utils.process_allgather(np.int32(bool(flag)))).any())
+
+
+def share_arrays(arrays: dict | None) -> dict | None:
+    """Process 0's dict of NumPy arrays (or None) on every process; the others pass anything."""
+    import jax
+
+    if jax.process_count() == 1:
+        return arrays
+    blob = b""
+    if is_main() and arrays is not None:
+        buffer = io.BytesIO()
+        np.savez(buffer, **arrays)
+        blob = buffer.getvalue()
+    size = int(share(np.int32(len(blob))))
+    if size == 0:
+        return None
+    data = share(np.frombuffer(blob, np.uint8) if is_main() else np.zeros(size, np.uint8))
+    with np.load(io.BytesIO(np.asarray(data).tobytes())) as saved:
+        return {name: saved[name] for name in saved.files}

@@ -122,10 +122,10 @@ def failure_schedule_for(cfg: TrainConfig, start_step: int) -> dict | None:
     return dict(start_after=-(-after // cfg.num_envs), adaptive=cfg.leg_failure_adaptive)
 
 
-def resume_point(cfg: TrainConfig, run_dir: Path, template, optimizer_template) -> tuple[int, object, object, dict]:
-    """(step, params, Adam state, exact position) to continue from: (0, None, None, None) for a new
+def resume_point(cfg: TrainConfig, run_dir: Path, template, optimizer_template) -> tuple[int, object, object, object]:
+    """(step, params, Adam state, saved position) to continue from: (0, None, None, None) for a new
     run, or one with no readable checkpoint; the Adam state is None for a checkpoint saved without
-    it, the position None where the resume cannot be exact (hexa_mjx.training.resume)."""
+    it, the saved position (hexa_mjx.training.resume) None for one saved without it."""
     if remove_temporaries(run_dir):
         print(f"removed half-written checkpoint folders in {checkpoint_dir(run_dir)}")
     if not cfg.resume:
@@ -137,11 +137,7 @@ def resume_point(cfg: TrainConfig, run_dir: Path, template, optimizer_template) 
     if restore is None:
         print(f"{run_dir} has no readable checkpoint: starting again from step 0")
         return 0, None, None, None
-    position, why = exact.exact_resume(load_resume(path), cfg, jax.process_count())
-    print(f"resuming {run_dir} from step {start_step:,}"
-          + (": exactly, as if it had not stopped" if position else f", not exactly: {why}")
-          + ("" if optimizer is not None else " (its checkpoint has no optimizer state: Adam starts afresh)"))
-    return start_step, restore, optimizer, position
+    return start_step, restore, optimizer, load_resume(path)
 
 
 def train(cfg: TrainConfig, on_eval=None, stop=None) -> dict:
@@ -167,9 +163,9 @@ def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
     eval_env = make_env_for(cfg) if main else env
     template = init_params(cfg, env)
     optimizer_template = adam_template(template)
-    start_step, restore, optimizer, position, logged = 0, None, None, None, set()
+    start_step, restore, optimizer, saved, logged = 0, None, None, None, set()
     if main:
-        start_step, restore, optimizer, position = resume_point(cfg, run_dir, template, optimizer_template)
+        start_step, restore, optimizer, saved = resume_point(cfg, run_dir, template, optimizer_template)
         if restore is None and cfg.init_from:  # a fine-tuning run's own checkpoints come first on resume
             source_step, restore = load_checkpoint(init_checkpoint(cfg), template)
             print(f"starting from the params of {cfg.init_from} (its step {source_step:,}); Adam starts afresh")
@@ -177,12 +173,20 @@ def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
         # logged again only if its row is missing (a run from before rows were written first).
         logged = keep_rows_up_to(run_dir, start_step)
         atomic.write(run_dir / "config.json", json.dumps(dataclasses.asdict(cfg), indent=2))
-    start_step, restored, adam = (int(x) for x in distributed.share(
-        jp.array([start_step, restore is not None, optimizer is not None])))
+    distributed.wait_for_main("reading the run directory", cfg.process_wait_timeout)
+    start_step, restored, adam, row_kept = (int(x) for x in distributed.share(
+        jp.array([start_step, restore is not None, optimizer is not None, start_step in logged])))
     if restored:
         restore = distributed.share(restore if main else template)
     if adam:
         optimizer = distributed.share(optimizer if main else optimizer_template)
+    position = None
+    if start_step > 0:  # resumed from the run's own checkpoint (none is written at step 0)
+        position, why = exact.exact_resume(exact.shared(saved), cfg, jax.process_count(), jax.process_index())
+        if main:
+            print(f"resuming {run_dir} from step {start_step:,}"
+                  + (": exactly, as if it had not stopped" if position else f", not exactly: {why}")
+                  + ("" if adam else " (its checkpoint has no optimizer state: Adam starts afresh)"))
     remaining = cfg.num_timesteps - start_step
     if remaining <= 0:
         print(f"{run_dir} already has {start_step:,} of {cfg.num_timesteps:,} steps; nothing to do")
@@ -196,19 +200,20 @@ def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
 
     # A fresh run evaluates its untrained params if asked; a resumed one its checkpoint's only if
     # that row is missing (a crash between the two, or a run from before rows were written first).
-    evaluate_start = start_step not in logged and (cfg.eval_at_start or start_step > 0) and not position
+    evaluate_start = not row_kept and (cfg.eval_at_start or start_step > 0) and not position
     randomization_fn = randomization.randomization_fn(env) if cfg.randomize else None
     evaluator = RunEvaluator(eval_env, wrap_env_fn(eval_env, cfg.randomize), randomization_fn,
                              policy_maker(cfg, eval_env), template, cfg.num_eval_envs,
                              cfg.episode_length, seed=cfg.seed + offset,
                              done=position["evaluations"] if position else 0) if main else None
 
-    def saved(at):  # what a checkpoint keeps for an exact resume (single-process runs)
-        return exact.saved_position(at, evaluator.calls, cfg) if jax.process_count() == 1 else None
-
-    def on_interval(step, make_policy, params, adam, env_state, at):  # process 0: before training, after each interval
+    def on_interval(step, make_policy, params, adam, env_state, at):  # before training, after each interval
         first = step == start_step - offset
         if first and not evaluate_start:
+            return
+        arrays = None if first else exact.position_arrays(at)  # every process takes part
+        if not main:  # process 0 evaluates and writes alone; the others wait for it here, not in a collective
+            distributed.wait_for_main(f"evaluation and checkpoint at step {offset + step:,}", cfg.process_wait_timeout)
             return
         logger.evaluating()
         metrics = evaluator(params)
@@ -217,6 +222,7 @@ def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
             metrics.update(level_summary(env_state.info["level"], cfg.curriculum_levels))
         if schedule:
             metrics.update(schedule_summary(env_state.info))
+        faults.point("evaluated")
         logger(offset + step, metrics)
         if first:
             faults.point("training-started")
@@ -224,7 +230,9 @@ def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
             # Row first, then checkpoint: a crash between them loses neither, because a resume drops
             # the rows past its checkpoint and trains those steps again.
             faults.point("row-written")
-            save_checkpoint(run_dir, offset + step, params, adam if cfg.record_optimizer else None, saved(at))
+            save_checkpoint(run_dir, offset + step, params, adam if cfg.record_optimizer else None,
+                            (arrays, exact.position_facts(at, evaluator.calls, cfg)))
+        distributed.wait_for_main(f"evaluation and checkpoint at step {offset + step:,}", cfg.process_wait_timeout)
         if on_eval:  # a sweep's scheduler may stop the run here: its checkpoint is saved
             on_eval(logger.last)
 
@@ -240,8 +248,14 @@ def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
             faults.point("update-done")
 
     def on_stop(step, params, adam, at):  # asked to stop: a checkpoint here, then out
-        path = save_checkpoint(run_dir, offset + step, params, adam, saved(at)) if main else None
+        arrays = exact.position_arrays(at)  # every process takes part
+        path = save_checkpoint(run_dir, offset + step, params, adam,
+                               (arrays, exact.position_facts(at, evaluator.calls, cfg))) if main else None
+        distributed.wait_for_main(f"checkpoint at the stop, step {offset + step:,}", cfg.process_wait_timeout)
         raise exact.Preempted(offset + step, path)
+
+    def asked_to_stop():  # the same answer on every process, whichever of them got the signal
+        return distributed.any_process(stop is not None and stop())
 
     t0 = time.time()
     devices = devices_for(cfg)
@@ -259,8 +273,8 @@ def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
               wrap_env_fn=wrap_env_fn(env, cfg.randomize, track_returns=True, failure_schedule=schedule),
               randomization_fn=randomization_fn, restore_params=restore, restore_adam=optimizer,
               anneal_lr=(offset, cfg.num_timesteps) if cfg.anneal_lr else None,
-              on_interval=on_interval if main else None,
-              on_update=on_update, resume=position, stop=stop, on_stop=on_stop)
+              on_interval=on_interval, on_update=on_update, resume=position,
+              stop=asked_to_stop if stop is not None else None, on_stop=on_stop)
     total = time.time() - t0
     if logger is None:
         print(f"process {jax.process_index()} done: {remaining:,} steps in {total / 60:.1f} min")

@@ -100,7 +100,7 @@ def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=No
           on_interval: Callable | None = None, on_update: Callable | None = None, resume: dict | None = None,
           stop: Callable | None = None, on_stop: Callable | None = None):
     """PPO as brax's `ppo.train` runs it (the same `settings` and `network_factory`), for
-    `settings.num_timesteps` env steps in `settings.num_evals - 1` intervals. On process 0,
+    `settings.num_timesteps` env steps in `settings.num_evals - 1` intervals. On every process,
     `on_interval(step, make_policy, params, adam_state, env_state)` is called before training and
     after each interval (params and Adam's state as host copies; the training environments' state
     laid out (devices, environments per device, ...));
@@ -194,7 +194,7 @@ def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=No
     def position(interval, done, key):
         return Position(step, interval, done, local_key, key, env_state)
 
-    if process_id == 0 and on_interval is not None:
+    if on_interval is not None:
         host = host_params()
         on_interval(step, make_policy, host[:3], host[3], env_state, position(first_interval, first_update, None))
     compiled = False
@@ -216,7 +216,7 @@ def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=No
                 host = host_params()
                 on_stop(step, host[:3], host[3], position(interval, done + 1, key))
                 return host[:3]
-        if process_id == 0 and on_interval is not None:
+        if on_interval is not None:
             host = host_params()
             on_interval(step, make_policy, host[:3], host[3], env_state, position(interval + 1, 0, None))
         if stop is not None and stop() and interval + 1 < intervals:

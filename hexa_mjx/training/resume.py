@@ -1,14 +1,16 @@
 """Exact resume and preemption: what a checkpoint keeps so that a resumed run continues bit for bit,
 and a stop requested by a signal that ends the run with such a checkpoint.
 
-A checkpoint of a single-process run holds, besides the params and Adam's state, the run's
-position (`hexa_mjx.training.ppo.Position`: the keys and the training environments' state,
-physics, episode counters, goals, commands, curriculum levels and failure draws included) and the
-number of evaluations run, which sets the evaluator's key. A resume from it with the same step
-budget and evaluation count continues exactly: the same rows and the same final params as the run
-that was never stopped (tests/test_crashes.py). A checkpoint without it (written before, or by a
-multi-process run) resumes as before: the same training continued from new keys and new
-episodes, which the resume says.
+A checkpoint holds, besides the params and Adam's state, the run's position
+(`hexa_mjx.training.ppo.Position`: the keys and the training environments' state, physics,
+episode counters, goals, commands, curriculum levels and failure draws included) and the number
+of evaluations run, which sets the evaluator's key. In a multi-process run process 0 gathers every
+process's position (stacked on a first axis by process index) and writes it; on resume it sends
+them back, each process taking its own. A resume from it with the same step budget, evaluation
+count and process count continues exactly: the same rows and the same final params as the run
+that was never stopped (tests/test_crashes.py). A checkpoint without it (written by an earlier
+version) resumes as before: the same training continued from new keys and new episodes, which the
+resume says.
 
 SIGTERM and SIGINT (`Preemption`) stop the run at the next update boundary; the run then writes a
 checkpoint with its position and exits with EXIT_CODE (`train.py`). Before the first update
@@ -17,12 +19,16 @@ checkpoint with its position and exits with EXIT_CODE (`train.py`). Before the f
 
 from __future__ import annotations
 
+import json
 import signal
 
 import jax
 import numpy as np
 
+from hexa_mjx.training import distributed
+
 EXIT_CODE = 143  # 128 + SIGTERM: what schedulers expect of a job that stopped when asked
+FACTS = "facts_json"  # the facts' JSON, as bytes, among the arrays process 0 sends the others
 
 
 class Preempted(Exception):
@@ -76,28 +82,48 @@ def schedule(cfg) -> dict:
             "seed": cfg.seed}
 
 
-def saved_position(position, evaluations: int, cfg) -> tuple[dict, dict]:
-    """(arrays, facts) a checkpoint keeps for an exact resume from `position` (a ppo.Position)."""
+def position_arrays(position) -> dict:
+    """The arrays a checkpoint keeps for an exact resume from `position` (a ppo.Position). Every
+    process of a multi-process run calls it: their positions are gathered, stacked by process."""
     arrays = {"local_key": np.asarray(position.local_key),
               **({"key": np.asarray(position.key)} if position.key is not None else {}),
               **{f"env_{i:04d}": np.asarray(leaf) for i, leaf in enumerate(jax.tree.leaves(position.env_state))}}
-    facts = {"step": position.step, "interval": position.interval, "update": position.update,
-             "evaluations": evaluations, "schedule": schedule(cfg)}
-    return arrays, facts
+    if jax.process_count() > 1:
+        from jax.experimental import multihost_utils
+
+        arrays = {k: np.asarray(v) for k, v in multihost_utils.process_allgather(arrays).items()}
+    return arrays
 
 
-def exact_resume(saved, cfg, processes: int) -> tuple[dict | None, str]:
-    """(ppo.train's `resume` with the evaluations run, or None; why not) from a checkpoint's saved
-    (arrays, facts) (None: it has none)."""
+def position_facts(position, evaluations: int, cfg) -> dict:
+    """The facts a checkpoint keeps with `position_arrays`: where the run is, and its schedule."""
+    return {"step": position.step, "interval": position.interval, "update": position.update,
+            "evaluations": evaluations, "schedule": schedule(cfg), "processes": jax.process_count()}
+
+
+def shared(saved: tuple[dict, dict] | None) -> tuple[dict, dict] | None:
+    """Process 0's saved (arrays, facts) on every process (the others pass None)."""
+    packed = None if saved is None else {**saved[0], FACTS: np.frombuffer(json.dumps(saved[1]).encode(), np.uint8)}
+    packed = distributed.share_arrays(packed)
+    if packed is None:
+        return None
+    facts = json.loads(packed.pop(FACTS).tobytes())
+    return packed, facts
+
+
+def exact_resume(saved, cfg, processes: int = 1, process: int = 0) -> tuple[dict | None, str]:
+    """(ppo.train's `resume` for process `process` of `processes`, with the evaluations run, or
+    None; why not) from a checkpoint's saved (arrays, facts) (None: it has none)."""
     if saved is None:
         return None, "its checkpoint has no saved keys and environments (written by an earlier version)"
     arrays, facts = saved
-    if processes > 1:
-        return None, "a multi-process run resumes from new keys and episodes"
+    if facts.get("processes", 1) != processes:
+        return None, f"it was written by {facts.get('processes', 1)} process(es), this run has {processes}"
     if facts["schedule"] != schedule(cfg):
         changed = [k for k, v in schedule(cfg).items() if facts["schedule"].get(k) != v]
         return None, f"{', '.join(changed)} changed since the checkpoint"
-    env = [arrays[k] for k in sorted(k for k in arrays if k.startswith("env_"))]
+    mine = (lambda a: a[process]) if processes > 1 else (lambda a: a)  # noqa: E731
+    env = [mine(arrays[k]) for k in sorted(k for k in arrays if k.startswith("env_"))]
     return {"step": facts["step"], "interval": facts["interval"], "update": facts["update"],
-            "local_key": arrays["local_key"], "key": arrays.get("key"), "env_state": env,
-            "evaluations": facts["evaluations"]}, ""
+            "local_key": mine(arrays["local_key"]), "key": mine(arrays["key"]) if "key" in arrays else None,
+            "env_state": env, "evaluations": facts["evaluations"]}, ""
