@@ -7,6 +7,7 @@
 Flags and defaults: `python train.py --help` (hexa_mjx/config.py, TrainConfig).
 """
 
+import os
 import sys
 from pathlib import Path
 
@@ -83,4 +84,12 @@ def run(cfg, preemption) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    code = main()
+    if code in (resume.EXIT_CODE, 130):
+        # Stopped when asked: every row and checkpoint is on disk, but a compile may still run on a
+        # daemon thread (the evaluation's, beside training), and the interpreter's teardown under it
+        # can crash (SIGSEGV) instead of exiting with the documented code. So leave at once.
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    sys.exit(code)
