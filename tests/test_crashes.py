@@ -103,6 +103,18 @@ def comparable(run_dir):
     return [{k: v for k, v in row.items() if k not in TIMING_FIELDS} for row in metric_rows(run_dir)]
 
 
+def assert_same_run(stopped, whole):
+    """The resumed run's rows (but for their clock figures) and final params equal the uninterrupted
+    run's, bit for bit."""
+    assert comparable(stopped) == comparable(whole)  # every row, bit for bit
+    cfg = config.load_config(whole)
+    template = training.init_params(cfg, config.make_env_for(cfg))
+    (_, a), (_, b) = (checkpoints.load_checkpoint(checkpoints.list_checkpoints(r)[-1][1], template)
+                      for r in (whole, stopped))
+    for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)):
+        np.testing.assert_array_equal(x, y)  # the final params, bit for bit
+
+
 def test_kills_and_sigterms_resume_bit_for_bit(tmp_path, cache_env):
     whole, stopped = tmp_path / "whole", tmp_path / "stopped"
     run("train.py", *EXACT, "--run_dir", str(whole), env=cache_env)
@@ -117,13 +129,7 @@ def test_kills_and_sigterms_resume_bit_for_bit(tmp_path, cache_env):
     proc = run("train.py", *EXACT, "--run_dir", str(stopped), "--resume", env=cache_env)
     assert "from step 128: exactly" in proc.stdout, proc.stdout
 
-    assert comparable(stopped) == comparable(whole)  # every row, bit for bit
-    cfg = config.load_config(whole)
-    template = training.init_params(cfg, config.make_env_for(cfg))
-    (_, a), (_, b) = (checkpoints.load_checkpoint(checkpoints.list_checkpoints(r)[-1][1], template)
-                      for r in (whole, stopped))
-    for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)):
-        np.testing.assert_array_equal(x, y)  # the final params, bit for bit
+    assert_same_run(stopped, whole)
 
 
 def test_two_processes_wait_for_a_slow_evaluation_and_resume_bit_for_bit(tmp_path, cache_env):
@@ -146,13 +152,7 @@ def test_two_processes_wait_for_a_slow_evaluation_and_resume_bit_for_bit(tmp_pat
     assert [r[0] for r in results] == [0, 0], results
     assert "from step 128: exactly" in results[0][1], results[0][1]
 
-    assert comparable(stopped) == comparable(whole)  # every row, bit for bit
-    cfg = config.load_config(whole)
-    template = training.init_params(cfg, config.make_env_for(cfg))
-    (_, a), (_, b) = (checkpoints.load_checkpoint(checkpoints.list_checkpoints(r)[-1][1], template)
-                      for r in (whole, stopped))
-    for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)):
-        np.testing.assert_array_equal(x, y)  # the final params, bit for bit
+    assert_same_run(stopped, whole)
 
 
 def test_a_stop_before_the_first_update_is_at_once(tmp_path, cache_env):
