@@ -182,18 +182,19 @@ def main(argv=None) -> int:
               f"{'-' if speed is None else format(speed, '.3f')} m/s; {rate}")
     else:
         print(f"summary: falls {s['fall_rate']:.0%}, feet only {s['feet_only_share']:.1%} of steps; {rate}")
+    t = None
     if env.task.uses_command:
         t = player.tracking(env, episodes)
         drift = t["stand_drift"]
         if t["steps"] and not args.follow:  # the follower's commands change every step: none settles
-                print(f"tracking ({t['settle_s']} s after each change left out, {t['average_s']} s average): velocity "
+            print(f"tracking ({t['settle_s']} s after each change left out, {t['average_s']} s average): velocity "
                   f"RMS {t['velocity_rms']:.3f} m/s, yaw rate RMS {t['yaw_rate_rms']:.3f} rad/s"
                   + (f", drift commanded to stand {drift['speed_mean']:.3f} m/s" if drift["commands"] else ""))
         if args.follow:
             done = [e.get("waypoints_reached", 0) == len(cli_waypoints(args)) for e in episodes]
             print(f"path follower: every waypoint reached in {sum(done)} of {len(done)} episodes")
     if args.json:
-        player.write_json(Path(args.json), policy, env, episodes)
+        player.write_json(Path(args.json), policy, env, episodes, t)
         print(f"wrote {args.json}")
     if not args.no_video:
         path = Path(args.video or f"play-{policy.path.stem}.mp4")

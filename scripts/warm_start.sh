@@ -1,6 +1,6 @@
 #!/bin/bash
 # Warm start of train.py, side by side (docs/RESULTS.md, "Warm start"): the fast preset as it is (A)
-# and with --no_progress --no_record_optimizer (B; until session 17 the only setting whose training
+# and with --no_progress --no_record_optimizer (B; once the only setting whose training
 # program the cache kept), cache emptied first; each console line is stamped with the seconds since
 # that run's launch.  Usage: bash scripts/warm_start.sh [cache folder]
 set -o pipefail

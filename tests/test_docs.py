@@ -6,7 +6,6 @@ import re
 import runpy
 import shlex
 import sys
-from pathlib import Path
 
 import pytest
 
@@ -137,6 +136,7 @@ def test_documented_command_parses(page, line, argv, monkeypatch, capsys):
 
 def test_no_page_narrates_development_history():
     pattern = re.compile(r"session [0-9]|sessions [0-9]|session-[0-9]", re.IGNORECASE)
-    for path in [*PAGES, *sorted((ROOT / "hexa_mjx").rglob("*.py")), *sorted((ROOT / "tests").glob("*.py"))]:
+    for path in [*PAGES, *sorted((ROOT / "hexa_mjx").rglob("*.py")), *sorted((ROOT / "tests").glob("*.py")),
+                 *sorted((ROOT / "scripts").glob("*")), *sorted((ROOT / "recipes").glob("*"))]:
         for n, line in enumerate(path.read_text().splitlines(), 1):
             assert not pattern.search(line) or path.name == "test_docs.py", f"{path.name}:{n}: {line.strip()}"

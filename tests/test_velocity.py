@@ -124,6 +124,14 @@ def test_tracking_figures_of_a_known_rollout():
     assert summary["stand_drift"]["speed_mean"] == pytest.approx(0.05, rel=0.03)
 
 
+def test_progress_line_divides_the_run_own_reward_scales_back():
+    # a run trained with --reward_scale tracking_ang_vel=10 logs the term scaled by 10, not by the table's 5
+    row = {"episode_length": 100, "eval/episode_reward/tracking_lin_vel": 0.5 * 20 * 100,
+           "eval/episode_reward/tracking_ang_vel": 0.25 * 10 * 100}
+    figure = velocity.VelocityTask.progress_figure(row, {"tracking_lin_vel": 20.0, "tracking_ang_vel": 10.0})
+    assert figure == "tracking v 0.50 yaw 0.25"
+
+
 def test_schedules_are_read_from_csv_and_json_and_bad_ones_refused(tmp_path):
     csv = tmp_path / "drive.csv"
     csv.write_text("t,vx,vy,yaw_rate\n0,0.5,0,0\n2.5,0,0,1.0  # turn\n4,0,0,0\n")
@@ -227,6 +235,8 @@ def test_play_drives_a_velocity_policy_from_a_schedule_and_along_a_path(velocity
     proc = run_play("--policy", onnx, "--commands", schedule, "--json", out, "--video", tmp_path / "v.mp4")
     assert proc.returncode == 0 and "velocity RMS" in proc.stdout, proc.stderr
     assert (tmp_path / "v.mp4").stat().st_size > 0
+    figures = json.loads(out.read_text())["tracking"]  # eval.py's figures, per class included
+    assert figures["settle_s"] == tracking.SETTLE_S and "classes" in figures and "stand_drift" in figures
     proc = run_play("--policy", onnx, "--follow", "--waypoints", "0.5,0", "--no_video")
     assert proc.returncode == 0 and "waypoints reached" in proc.stdout, proc.stderr
 

@@ -180,12 +180,13 @@ def summarize(episodes: list[dict]) -> dict:
             "speed_to_first_goal": float(np.mean(speeds)) if speeds else None}
 
 
-def write_json(path: Path, policy: OnnxPolicy, env: NativeEnv, episodes: list[dict]) -> None:
-    """Per-episode results and their summary, written atomically."""
+def write_json(path: Path, policy: OnnxPolicy, env: NativeEnv, episodes: list[dict], tracking: dict | None = None) -> None:
+    """Per-episode results and their summary (with the velocity task's `tracking` figures, eval.py's
+    per-class table included), written atomically."""
     rows = [{k: v for k, v in e.items() if k != "trajectory"} for e in episodes]
     doc = {"policy": str(policy.path), "task": env.config.task, "engine": "mujoco (native C)",
            "model": env.config.model_path, "model_matches_training": model_matches(policy, env),
-           "summary": summarize(episodes), "episodes": rows}
+           "summary": summarize(episodes), **({"tracking": tracking} if tracking else {}), "episodes": rows}
     atomic.write(path, json.dumps(doc, indent=1))
 
 

@@ -76,7 +76,7 @@ def training_profile(num_envs: int = 256, repeats: int = 3, **overrides) -> dict
     one = jax.local_devices()[:1]
 
     def replicate(tree):
-        return jax.device_put_replicated(tree, one)
+        return ppo.replicate(tree, one)
 
     act = jax.pmap(lambda state, key, p: rollout((normalizer, p.policy, p.value), state, key)[1], axis_name=ppo.AXIS)
     state0 = jax.tree.map(lambda x: x[None], jax.jit(wrapped.reset)(keys))

@@ -108,8 +108,9 @@ class Task:
     # -- figures --------------------------------------------------------------
 
     @classmethod
-    def progress_figure(cls, row: dict) -> str:
-        """The task's figure on the progress line, from an evaluation row."""
+    def progress_figure(cls, row: dict, scales: dict) -> str:
+        """The task's figure on the progress line, from an evaluation row of a run trained with
+        reward `scales`."""
         return f"goal bonus {row['goal_bonus']:7.1f}"
 
     def evaluation(self, env, start_qpos, traj, alive, fell) -> tuple[dict, dict]:

@@ -89,7 +89,7 @@ class NavigateTask(Task):
     # -- figures --------------------------------------------------------------
 
     @classmethod
-    def progress_figure(cls, row: dict) -> str:
+    def progress_figure(cls, row: dict, scales: dict) -> str:
         return f"goals {row['goals_per_episode']:.2f}"
 
     @classmethod

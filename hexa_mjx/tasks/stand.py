@@ -78,5 +78,5 @@ class StandTask(Task):
             *observations.proprioception_slices(joints)])
 
     @classmethod
-    def progress_figure(cls, row: dict) -> str:
+    def progress_figure(cls, row: dict, scales: dict) -> str:
         return f"heading and spot held {row['success_rate']:.0%}"

@@ -161,8 +161,8 @@ class VelocityTask(Task):
     # -- figures --------------------------------------------------------------
 
     @classmethod
-    def progress_figure(cls, row: dict) -> str:
-        scales, steps = cls.rewards["velocity"], row.get("episode_length") or np.nan
+    def progress_figure(cls, row: dict, scales: dict) -> str:
+        steps = row.get("episode_length") or np.nan  # the row's terms are scaled: divided back
         lin = row.get("eval/episode_reward/tracking_lin_vel", np.nan) / scales["tracking_lin_vel"] / steps
         ang = row.get("eval/episode_reward/tracking_ang_vel", np.nan) / scales["tracking_ang_vel"] / steps
         return f"tracking v {lin:.2f} yaw {ang:.2f}"

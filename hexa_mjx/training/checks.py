@@ -45,6 +45,14 @@ def check_ranges(cfg: TrainConfig) -> None:
         raise ConfigError(f"--hidden sizes must each be at least 1, got {cfg.hidden}")
 
 
+def run_scales(cfg: TrainConfig) -> dict[str, float]:
+    """The reward scales a run trains with: its task's table for --reward, ablations and
+    --reward_scale overrides applied (ConfigError on a malformed or unknown override)."""
+    task = task_class(cfg.task)
+    return rewards.make_scales(task.rewards[cfg.reward or default_reward(cfg.task)], cfg.ablate, reward_overrides(cfg),
+                               task.terms)
+
+
 def reward_overrides(cfg: TrainConfig) -> dict[str, float]:
     """--reward_scale's TERM=VALUE pairs as a dict; ConfigError on a malformed pair or an unknown term."""
     overrides = {}
@@ -69,7 +77,7 @@ def validate(cfg: TrainConfig, writes: bool = True) -> TrainConfig:
     task = task_class(cfg.task)
     if cfg.reward not in task.rewards:
         raise ConfigError(f"--reward {cfg.reward} is not one of the {cfg.task} task's: {', '.join(task.rewards)}")
-    rewards.make_scales(task.rewards[cfg.reward], cfg.ablate, reward_overrides(cfg), task.terms)
+    run_scales(cfg)
     check_ranges(cfg)
     distributed.check(cfg.coordinator, cfg.num_processes, cfg.process_id, cfg.coordinator_timeout)
     if not cfg.process_wait_timeout > 0:

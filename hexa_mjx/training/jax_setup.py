@@ -53,7 +53,10 @@ def prepare_jax(cpu_devices: int = 0, compile_cache: bool = True) -> None:
 
     if not xla_bridge.backends_are_initialized():
         jax.config.update("jax_num_cpu_devices", cpu_devices or len(os.sched_getaffinity(0)))
-    jax.config.update("jax_pmap_shmap_merge", False)
+    try:
+        jax.config.update("jax_pmap_shmap_merge", False)
+    except AttributeError:  # jax >= 0.10 has only the shard_map-based pmap (a GPU image's jax, say)
+        pass
     if compile_cache:
         folder = os.environ.get("JAX_COMPILATION_CACHE_DIR") or str(compile_cache_dir())
         jax.config.update("jax_compilation_cache_dir", folder)

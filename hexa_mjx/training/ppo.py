@@ -37,6 +37,15 @@ def unpmap(tree):
     return jax.tree.map(lambda x: x.addressable_shards[0].data.squeeze(0), tree)
 
 
+def replicate(tree, devices):
+    """`tree` with one copy on each of `devices`, stacked on a new leading axis: pmap's input layout.
+    (jax 0.9's `device_put_replicated`; jax >= 0.10 dropped it, and a GPU image may hold one.)"""
+    if hasattr(jax, "device_put_replicated"):
+        return jax.device_put_replicated(tree, devices)
+    sharding = jax.sharding.NamedSharding(jax.sharding.Mesh(np.array(devices), (AXIS,)), jax.sharding.PartitionSpec(AXIS))
+    return jax.tree.map(lambda x: jax.device_put(jp.stack([jp.asarray(x)] * len(devices)), sharding), tree)
+
+
 def strong_types(tree):
     """`tree` with weak types removed: one compile for the first update and the later ones."""
     return jax.tree.map(lambda x: jp.asarray(x).astype(jp.asarray(x).dtype), tree)
@@ -185,7 +194,7 @@ def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=No
     if resume is not None:
         step, first_interval, first_update = resume["step"], resume["interval"], resume["update"]
         state = state.replace(env_steps=types.UInt64(hi=step >> 32, lo=step & 0xFFFFFFFF))
-    state, env_state = jax.device_put_replicated(strong_types(state), devices), strong_types(env_state)
+    state, env_state = replicate(strong_types(state), devices), strong_types(env_state)
 
     def host_params():
         return jax.tree.map(np.asarray, unpmap((state.normalizer_params, state.params.policy, state.params.value,

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Callable
 
 from hexa_mjx.tasks import task_class
+from hexa_mjx.training.checks import run_scales
 from hexa_mjx import atomic
 
 if TYPE_CHECKING:
@@ -182,7 +183,7 @@ class Logger:
         goal = (f"distance {row['final_distance']:.2f} m  success {row['success_rate']:.0%}  " if task.has_goal
                 else "")
         print(f"step {step:>9,}/{self.cfg.num_timesteps:,}  {rate:7.0f} steps/s  left {fmt_time(left)}  "
-              f"return {row['episode_return']:8.1f}  {goal}{task.progress_figure(row)}  falls {row['fall_rate']:.0%}"
+              f"return {row['episode_return']:8.1f}  {goal}{task.progress_figure(row, run_scales(self.cfg))}  falls {row['fall_rate']:.0%}"
               + (f"  non-finite {row['nonfinite_rate']:.0%}" if row["nonfinite_rate"] > 0 else "")
               + (f"  curriculum level {row['curriculum/level_mean']:.1f} (top {row['curriculum/top_level_share']:.0%})"
                  if "curriculum/level_mean" in row else ""), flush=True)
