@@ -18,8 +18,10 @@ PY=${PYTHON:-python3}
 QUICK=${GPU_CHECK_QUICK:-0}
 if [ "$QUICK" = 1 ]; then
   BATCHES="8 16"; STEPS=5; ENVS=16; BATCH=8; MINIBATCHES=4; TRAIN_STEPS=8192; LIMIT=600
+  EXTRA=(--num_eval_envs 4 --episode_length 50)
 else
   BATCHES="1024 4096 8192"; STEPS=100; ENVS=4096; BATCH=256; MINIBATCHES=32; TRAIN_STEPS=30000000; LIMIT=150
+  EXTRA=()
 fi
 
 if ls .whl/*.whl >/dev/null 2>&1; then
@@ -49,7 +51,7 @@ train() {  # NAME ARGS...: a short training run, its console and metrics copied 
   stamp "training: $name" | tee "$OUT/train_$name.txt"
   rm -rf "/tmp/gpu_check_$name"
   timeout "$LIMIT" "$PY" train.py --run_dir "/tmp/gpu_check_$name" --num_envs "$ENVS" --batch_size "$BATCH" \
-    --num_minibatches "$MINIBATCHES" --num_timesteps "$TRAIN_STEPS" --num_evals 6 "$@" 2>&1 | tee -a "$OUT/train_$name.txt"
+    --num_minibatches "$MINIBATCHES" --num_timesteps "$TRAIN_STEPS" --num_evals 6 ${EXTRA[@]+"${EXTRA[@]}"} "$@" 2>&1 | tee -a "$OUT/train_$name.txt"
   cp "/tmp/gpu_check_$name/metrics.jsonl" "$OUT/metrics_$name.jsonl" 2>/dev/null || true
 }
 train fast --recipe fast
@@ -63,7 +65,7 @@ import sys, time
 import jax, mujoco
 from mujoco import mjx
 from hexa_mjx.robot import constants
-model = mujoco.MjModel.from_xml_path(str(constants.MODEL_PATH))
+model = mujoco.MjModel.from_xml_path(str(constants.MODEL_XML))
 for impl in ("jax", "warp"):
     try:
         m = mjx.put_model(model, impl=impl)
