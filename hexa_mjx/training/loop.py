@@ -30,8 +30,6 @@ from hexa_mjx.training.jax_setup import devices_for, prepare_jax
 from hexa_mjx.training.optimizer_state import adam_template
 from hexa_mjx.training.progress import Logger, keep_rows_up_to
 from hexa_mjx.training.run_lock import RunLock
-from hexa_mjx.training.checks import run_scales
-from hexa_mjx.tasks import task_class
 from hexa_mjx.evaluation.run_evaluator import RunEvaluator
 from hexa_mjx.engines.wrappers import mean_last_return
 from hexa_mjx import atomic
@@ -283,9 +281,8 @@ def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
         return {}
     logger.close()
     last = logger.last
-    task = task_class(cfg.task)
     figure = (f"success {last.get('success_rate', math.nan):.0%}, distance {last.get('final_distance', math.nan):.2f} m"
-              if task.has_goal or not last else task.progress_figure(last, run_scales(cfg)))
+              if logger.task.has_goal or not last else logger.task.progress_figure(last, logger.scales))
     print(f"done: {cfg.num_timesteps:,} steps in {total / 60:.1f} min; last evaluation: {figure}, "
           f"return {last.get('episode_return', math.nan):.1f}; checkpoints in {checkpoint_dir(run_dir)}")
     return last

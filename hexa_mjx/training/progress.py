@@ -113,6 +113,7 @@ class Logger:
         self.path = Path(run_dir) / "metrics.jsonl"
         self.tb = SummaryWriter(str(Path(run_dir) / "tb"))
         self.cfg, self.start_step, self.t0 = cfg, start_step, time.time()
+        self.task, self.scales = task_class(cfg.task), run_scales(cfg)  # what the rows' figures are read with
         self.interval_s = interval_s
         self.last = {}
         self.phase, self.phase_t0 = "", self.t0
@@ -179,11 +180,10 @@ class Logger:
         self.tb.flush()
         left = self.eta.left(step)  # before `evaluated` starts a new rate window
         self.evaluated(step)
-        task = task_class(self.cfg.task)
-        goal = (f"distance {row['final_distance']:.2f} m  success {row['success_rate']:.0%}  " if task.has_goal
+        goal = (f"distance {row['final_distance']:.2f} m  success {row['success_rate']:.0%}  " if self.task.has_goal
                 else "")
         print(f"step {step:>9,}/{self.cfg.num_timesteps:,}  {rate:7.0f} steps/s  left {fmt_time(left)}  "
-              f"return {row['episode_return']:8.1f}  {goal}{task.progress_figure(row, run_scales(self.cfg))}  falls {row['fall_rate']:.0%}"
+              f"return {row['episode_return']:8.1f}  {goal}{self.task.progress_figure(row, self.scales)}  falls {row['fall_rate']:.0%}"
               + (f"  non-finite {row['nonfinite_rate']:.0%}" if row["nonfinite_rate"] > 0 else "")
               + (f"  curriculum level {row['curriculum/level_mean']:.1f} (top {row['curriculum/top_level_share']:.0%})"
                  if "curriculum/level_mean" in row else ""), flush=True)
