@@ -44,9 +44,12 @@ def test_the_same_figures_as_brax_evaluator(setup):
     mine = [ours(params) for _ in range(2)]
     theirs = brax_figures(cfg, env, params, 2)
     for a, b in zip(mine, theirs):
-        for name in ("eval/episode_reward", "eval/episode_distance", "eval/avg_episode_length",
+        for name in ("eval/episode_distance", "eval/episode_final_distance", "eval/avg_episode_length",
                      "eval/episode_reward/energy"):
             assert a[name] == pytest.approx(float(b[name]), rel=1e-4, abs=1e-5), name
+        # The return nets terms that scale distances by 1000 (goal_approach): on some CPUs the two
+        # batch layouts round the final position 6e-7 m apart, which is 1.0e-4 of a return of -7.
+        assert a["eval/episode_reward"] == pytest.approx(float(b["eval/episode_reward"]), rel=1e-3)
     assert mine[0]["eval/episode_reward"] != pytest.approx(mine[1]["eval/episode_reward"], rel=1e-6)  # new episodes
     # An exact resume after one evaluation continues with the second one's key.
     resumed = RunEvaluator(env, loop.wrap_env_fn(env), None, loop.policy_maker(cfg, env), params, EPISODES, LENGTH,
