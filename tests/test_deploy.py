@@ -20,8 +20,9 @@ from hexa_mjx.tasks import TASKS
 
 POLICIES = robot.REPO_ROOT / "policies"
 SHIPPED = ("goal", "navigate", "velocity")
-# m/s: about twice the shipped velocity policy's RMS error in native MuJoCo over 32 episodes (0.107).
-VELOCITY_RMS_BOUND = 0.25
+# m/s: about two and a half times the shipped velocity policy's RMS error in native MuJoCo over 32
+# episodes (0.076; single episodes reach 0.10).
+VELOCITY_RMS_BOUND = 0.2
 
 
 @pytest.fixture(scope="module")

@@ -138,3 +138,29 @@ def test_gait_table_from_evaluated_runs(tmp_path):
     (row,) = study_results.gait_table(tmp_path)
     assert (row["seeds"], row["gait_classes"], row["cot_mean"], row["cot_std"]) == (2, "tripod, irregular", 3.0, 1.0)
     assert "| energy | energy | 2 | 100% | tripod, irregular |" in study_results.write_gait_table([row], tmp_path).read_text()
+
+
+def test_seed_summary_reports_median_iqr_and_worst_of_eval_and_play_files(tmp_path, capsys):
+    from hexa_mjx.studies import seed_summary
+
+    files = []
+    for seed, (planar, fall) in enumerate([(0.09, 0.0), (0.11, 0.02), (0.10, 0.01), (0.12, 0.0), (0.08, 0.04)]):
+        run = tmp_path / f"vel-s{seed}"
+        (run / "eval256").mkdir(parents=True)
+        doc = {"config": {"task": "velocity"},
+               "summary": {"fall_rate": fall, "success_rate": 0.0, "tracking": {"velocity_rms": planar}}}
+        (run / "eval256" / "metrics.json").write_text(json.dumps(doc))
+        files.append(run / "eval256" / "metrics.json")
+    native = tmp_path / "native.json"  # play.py's layout: the task named at the top
+    native.write_text(json.dumps({"task": "navigate", "summary": {"success_rate": 0.5, "fall_rate": 0.0}}))
+    seed_summary.main([str(f) for f in files[:5]] + ["--json", str(tmp_path / "s.json")])
+    out = json.loads((tmp_path / "s.json").read_text())
+    planar = out["summary"]["planar RMS error"]
+    assert planar["median"] == pytest.approx(0.10) and planar["worst"] == pytest.approx(0.12)
+    assert (planar["q25"], planar["q75"]) == (pytest.approx(0.09), pytest.approx(0.11))
+    assert out["summary"]["no fall"]["worst"] == pytest.approx(96.0)  # the fewest episodes without a fall
+    assert "success" not in out["summary"]  # a task without goals has no success figure
+    assert "| vel-s4 | 0.080 |" in capsys.readouterr().out
+    assert seed_summary.figures(json.loads(native.read_text()))["success"] == pytest.approx(50.0)
+    with pytest.raises(SystemExit):
+        seed_summary.main([str(tmp_path / "missing.json")])

@@ -213,7 +213,8 @@ def test_eval_reports_tracking_and_export_names_the_command(velocity_onnx, tmp_p
     assert "velocity RMS error" in text and "final distance" not in text
     meta = json.loads(onnx.with_suffix(".json").read_text())
     assert [f["name"] for f in meta["command"]] == ["vx", "vy", "yaw_rate"]
-    assert meta["command"][0]["units"] == "m/s" and meta["command"][2]["range"] == [-1.5, 1.5]
+    trained = make_config(task="velocity").command_yaw_rate  # the run's own: the default range
+    assert meta["command"][0]["units"] == "m/s" and meta["command"][2]["range"] == list(trained)
     assert meta["observation_layout"][0]["what"].startswith("command")
 
 
@@ -252,3 +253,11 @@ def test_play_refuses_bad_driving_input_before_running(velocity_onnx, tmp_path):
     for args, message in cases.items():
         proc = run_play("--policy", *args, "--no_video")
         assert proc.returncode == 2 and message in proc.stderr and "Traceback" not in proc.stderr, (args, proc.stderr)
+
+
+def test_standing_still_scores_one_on_zero_commands_and_less_on_wider_ranges():
+    task = lambda **kw: velocity.VelocityTask(make_config("velocity", **kw), None)  # noqa: E731
+    assert tracking.standing_still(task(command_zero_share=1.0), draws=200) == (1.0, 1.0)
+    narrow = tracking.standing_still(task(), draws=5000)
+    wide = tracking.standing_still(task(command_vx=(-1.0, 2.0), command_yaw_rate=(-3.0, 3.0)), draws=5000)
+    assert 0 < wide[0] < narrow[0] < 1 and 0 < wide[1] < narrow[1] < 1

@@ -202,9 +202,21 @@ def plot_tracking(task, dt: float, traj: dict, out):
     return save_figure(fig, out)
 
 
+def standing_still(task, draws: int = 100_000, seed: int = 0) -> tuple[float, float]:
+    """The tracking terms' mean per step for a robot that stands still, over `draws` commands of
+    `task` (its ranges and class shares): what a policy that has learnt nothing scores."""
+    from hexa_mjx.engines.native import NumpyDraws
+    from hexa_mjx.tasks.velocity import TRACKING_SIGMA
+
+    rng = NumpyDraws(np.random.default_rng(seed))
+    c = np.array([task.draw_command(rng, None)[0] for _ in range(draws)])
+    return (float(np.exp(-(c[:, :2] ** 2).sum(1) / TRACKING_SIGMA).mean()),
+            float(np.exp(-c[:, 2] ** 2 / TRACKING_SIGMA).mean()))
+
+
 def learning_curves(run_dirs, out):
     """The tracking terms' mean per step (unscaled) at each training evaluation of velocity runs,
-    beside what standing still scores on the default commands."""
+    beside what standing still scores on each run's commands (one line per distinct range)."""
     import json
     from pathlib import Path
 
@@ -214,31 +226,33 @@ def learning_curves(run_dirs, out):
     import matplotlib.pyplot as plt
 
     from hexa_mjx.evaluation.plots import save_figure
-    from hexa_mjx.tasks.velocity import VelocityTask
+    from hexa_mjx.training.checks import run_scales
+    from hexa_mjx.training.config import load_config, make_env_for
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 3.6))
+    baselines = {}
     for k, run in enumerate(map(Path, run_dirs)):
-        cfg = json.loads((run / "config.json").read_text())
-        scales = dict(VelocityTask.rewards["velocity"])
-        scales.update({t: float(v) for t, v in (item.split("=") for item in cfg.get("reward_scale", []))})
+        cfg = load_config(run)
+        scales = run_scales(cfg)
+        ranges = (tuple(cfg.command_vx), tuple(cfg.command_vy), tuple(cfg.command_yaw_rate))
+        if ranges not in baselines:
+            baselines[ranges] = standing_still(make_env_for(cfg).task, draws=20_000)
         rows = [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines() if line.strip()]
         for ax, term in zip(axes, ("tracking_lin_vel", "tracking_ang_vel")):
             ax.plot([r["step"] / 1e6 for r in rows],
                     [r[f"eval/episode_reward/{term}"] / r["episode_length"] / scales[term] for r in rows],
                     "o-", color=f"C{k}", label=run.name)
-    for ax, title, still in zip(axes, ("planar velocity", "yaw rate"), STANDING_STILL):
-        ax.axhline(still, color="gray", ls="--", label="standing still")
+    for ax, title, i in zip(axes, ("planar velocity", "yaw rate"), (0, 1)):
+        for n, (ranges, still) in enumerate(baselines.items()):
+            vx, _, wz = ranges
+            ax.axhline(still[i], color="gray", ls=("--", ":", "-.")[n % 3],
+                       label=f"standing still, vx to {vx[1]:g} m/s, yaw to {wz[1]:g} rad/s")
         ax.set_xlabel("env steps, millions")
         ax.set_title(f"{title} tracking per step, exp(-error^2 / 0.25)", fontsize=9)
         ax.set_ylim(0, 1)
     axes[0].legend(fontsize=7)
     fig.tight_layout()
     return save_figure(fig, Path(out))
-
-
-# The tracking terms' mean per step of a robot that stands still, over the default commands
-# (docs/RESULTS.md, "Velocity commands": 100,000 draws).
-STANDING_STILL = (0.663, 0.787)
 
 
 def main(argv=None) -> None:

@@ -68,11 +68,11 @@ class EnvConfig:
                                    "frame, or a file holding that; the last waypoint stays the goal")
     # Velocity commands (hexa_mjx.tasks.velocity): (vx, vy, yaw rate) in the heading frame, drawn
     # uniformly in these ranges, held for command_interval, a share of them exactly zero (stand).
-    command_vx: tuple = setting((-0.5, 1.0), "velocity: m/s, forward speed range MIN MAX of the commands",
+    command_vx: tuple = setting((-0.5, 0.6), "velocity: m/s, forward speed range MIN MAX of the commands",
                                 nargs=2, type=float, metavar=("MIN", "MAX"))
     command_vy: tuple = setting((-0.5, 0.5), "velocity: m/s, sideways (left) speed range MIN MAX of the commands",
                                 nargs=2, type=float, metavar=("MIN", "MAX"))
-    command_yaw_rate: tuple = setting((-1.5, 1.5), "velocity: rad/s, yaw rate range MIN MAX of the commands "
+    command_yaw_rate: tuple = setting((-1.0, 1.0), "velocity: rad/s, yaw rate range MIN MAX of the commands "
                                       "(counter-clockwise positive)", nargs=2, type=float, metavar=("MIN", "MAX"))
     command_interval: float = setting(4.0, "velocity: s each command holds before the next is drawn")
     command_zero_share: float = setting(0.1, "velocity: share of the commands that are exactly zero (stand still)")

@@ -1,0 +1,117 @@
+"""Several seeds' evaluations in one table: each seed's figures, then the median, the
+interquartile range and the worst seed (rliable's way of reporting few runs: Agarwal et al. 2021).
+
+    python -m hexa_mjx.studies.seed_summary runs/velocity-s*/eval256/metrics.json
+    python -m hexa_mjx.studies.seed_summary runs/velocity-s*/native.json --markdown
+
+Reads eval.py's metrics.json and play.py's --json files alike; a figure one of them lacks is "-".
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+# (name, where in the file, unit, "max" if the largest value is the worst else "min"); a path is a
+# list of alternatives, each a key path: eval.py and play.py name a few figures differently.
+FIGURES = (
+    ("planar RMS error", [("summary", "tracking", "velocity_rms"), ("tracking", "velocity_rms")], "m/s", "max"),
+    ("yaw-rate RMS error", [("summary", "tracking", "yaw_rate_rms"), ("tracking", "yaw_rate_rms")], "rad/s", "max"),
+    ("drift told to stand", [("summary", "tracking", "stand_drift", "speed_mean"),
+                             ("tracking", "stand_drift", "speed_mean")], "m/s", "max"),
+    ("success", [("summary", "success_rate")], "%", "min"),
+    ("no fall", [("summary", "fall_rate")], "%", "min"),
+    ("feet only", [("summary", "feet_only_steps"), ("summary", "feet_only_share")], "%", "min"),
+)
+SHARES = {"success", "no fall", "feet only"}  # fractions, shown in percent
+
+
+def _lookup(doc: dict, paths) -> float:
+    for path in paths:
+        value = doc
+        for key in path:
+            value = value.get(key) if isinstance(value, dict) else None
+        if isinstance(value, (int, float)) and math.isfinite(value):
+            return float(value)
+    return math.nan
+
+
+def task_of(doc: dict) -> str | None:
+    """The task an evaluation file ran: play.py names it at the top, eval.py in the run's config."""
+    return doc.get("task") or (doc.get("config") or {}).get("task")
+
+
+def figures(doc: dict) -> dict:
+    """The FIGURES of one evaluation file's contents (NaN where it has none, and success for a
+    task without goals), shares in percent."""
+    from hexa_mjx.tasks import TASKS
+
+    task = TASKS.get(task_of(doc))
+    out = {}
+    for name, paths, _, _ in FIGURES:
+        value = math.nan if name == "success" and task is not None and not task.has_goal else _lookup(doc, paths)
+        if name == "no fall":
+            value = 1.0 - value
+        out[name] = 100.0 * value if name in SHARES else value
+    return out
+
+
+def summarize(rows: list[dict]) -> dict:
+    """Per figure: median, 25th and 75th percentiles and the worst value over `rows` (NaNs left out)."""
+    out = {}
+    for name, _, _, worst in FIGURES:
+        values = np.array([r[name] for r in rows if math.isfinite(r[name])])
+        if values.size:
+            q25, median, q75 = np.percentile(values, [25, 50, 75])
+            out[name] = {"median": median, "q25": q25, "q75": q75,
+                         "worst": values.max() if worst == "max" else values.min()}
+    return out
+
+
+def _cell(name: str, value: float) -> str:
+    return "-" if not math.isfinite(value) else (f"{value:.2f}" if name in SHARES else f"{value:.3f}")
+
+
+def table(labels: list[str], rows: list[dict]) -> str:
+    """A markdown table: one row per run, then median, IQR and worst, of the figures any run has."""
+    stats = summarize(rows)
+    names = [n for n, *_ in FIGURES if n in stats]
+    units = {n: u for n, _, u, _ in FIGURES}
+    lines = ["| run | " + " | ".join(f"{n} ({units[n]})" for n in names) + " |",
+             "|---" * (len(names) + 1) + "|"]
+    lines += [f"| {label} | " + " | ".join(_cell(n, r[n]) for n in names) + " |" for label, r in zip(labels, rows)]
+    lines.append("| median | " + " | ".join(_cell(n, stats[n]["median"]) for n in names) + " |")
+    lines.append("| IQR | " + " | ".join(f"{_cell(n, stats[n]['q25'])} to {_cell(n, stats[n]['q75'])}"
+                                         for n in names) + " |")
+    lines.append("| worst | " + " | ".join(_cell(n, stats[n]["worst"]) for n in names) + " |")
+    return "\n".join(lines)
+
+
+def label_of(path: Path) -> str:
+    """A run's name from its file: the run folder's (eval.py's metrics.json sits one folder down)."""
+    parent = path.parent
+    return parent.parent.name if path.name == "metrics.json" else f"{parent.name}/{path.stem}"
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("files", nargs="+", type=Path, help="eval.py metrics.json or play.py --json files, one per seed")
+    parser.add_argument("--json", type=Path, help="also write the per-run figures and the summary here")
+    args = parser.parse_args(argv)
+    missing = [str(f) for f in args.files if not f.is_file()]
+    if missing:
+        parser.error(f"no such file: {', '.join(missing)} (give eval.py's metrics.json or play.py's --json output)")
+    rows = [figures(json.loads(f.read_text())) for f in args.files]
+    labels = [label_of(f) for f in args.files]
+    print(table(labels, rows))
+    if args.json:
+        args.json.write_text(json.dumps({"runs": dict(zip(labels, rows)), "summary": summarize(rows)}, indent=2))
+
+
+if __name__ == "__main__":
+    main()
