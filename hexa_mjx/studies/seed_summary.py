@@ -2,7 +2,7 @@
 interquartile range and the worst seed (rliable's way of reporting few runs: Agarwal et al. 2021).
 
     python -m hexa_mjx.studies.seed_summary runs/velocity-s*/eval256/metrics.json
-    python -m hexa_mjx.studies.seed_summary runs/velocity-s*/native.json --markdown
+    python -m hexa_mjx.studies.seed_summary runs/velocity-s*/native.json --json summary.json
 
 Reads eval.py's metrics.json and play.py's --json files alike; a figure one of them lacks is "-".
 """
