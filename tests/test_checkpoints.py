@@ -1,5 +1,6 @@
 """Checkpoint integrity: a digest and a finiteness check on load, and resume's fall-back."""
 
+import dataclasses
 import json
 
 import jax
@@ -92,3 +93,47 @@ def test_a_full_disk_keeps_the_last_checkpoint_and_leaves_nothing_behind(tmp_pat
     assert [s for s, _ in checkpoints.list_checkpoints(tmp_path)] == [64]
     assert not list((tmp_path / "checkpoints").glob("tmp-*"))
     assert checkpoints.load_checkpoint(checkpoints.list_checkpoints(tmp_path)[0][1], template)[0] == 64
+
+
+def velocity_row(step, lin, ang, falls, scales, length=1000.0):
+    """An evaluation row of a velocity run whose tracking terms average `lin` and `ang` per step."""
+    return {"step": step, "episode_length": length, "fall_rate": falls, "success_rate": 0.0,
+            "eval/episode_reward/tracking_lin_vel": lin * scales["tracking_lin_vel"] * length,
+            "eval/episode_reward/tracking_ang_vel": ang * scales["tracking_ang_vel"] * length}
+
+
+def test_best_is_the_checkpoint_the_evaluations_chose(template, tmp_path):
+    from hexa_mjx.training import checks, selection
+
+    cfg = config.TrainConfig(task="velocity", reward_scale=["tracking_ang_vel=10"], run_dir=str(tmp_path))
+    (tmp_path / "config.json").write_text(json.dumps(dataclasses.asdict(cfg)))
+    scales = checks.run_scales(cfg)
+    rows = [velocity_row(0, 0.95, 0.95, 0.0, scales),  # the evaluation before training: no checkpoint
+            velocity_row(100, 0.80, 0.40, 0.0, scales), velocity_row(200, 0.90, 0.44, 0.0, scales),
+            velocity_row(300, 0.91, 0.46, 0.16, scales)]  # tracks best, falls in 16% of episodes
+    (tmp_path / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows) + '{"step": 4')
+    for step in (100, 200, 300):
+        checkpoints.save_checkpoint(tmp_path, step, template)
+    assert [s for s, _ in selection.scored_rows(tmp_path)] == [100, 200, 300]
+    assert selection.best_step(tmp_path)[0] == 200
+    assert checkpoints.resolve_checkpoint(tmp_path / "best") == (tmp_path, tmp_path / "checkpoints" / "000000000200")
+    # a tie goes to the later checkpoint
+    (tmp_path / "metrics.jsonl").write_text("".join(json.dumps(velocity_row(s, 0.9, 0.4, 0.0, scales)) + "\n"
+                                                    for s in (100, 200, 300)))
+    assert selection.best_step(tmp_path)[0] == 300
+
+
+def test_best_of_a_run_without_evaluated_checkpoints_says_what_to_do(tmp_path):
+    (tmp_path / "config.json").write_text(json.dumps(dataclasses.asdict(config.TrainConfig(run_dir=str(tmp_path)))))
+    with pytest.raises(FileNotFoundError, match="pass the run directory"):
+        checkpoints.resolve_checkpoint(tmp_path / "best")
+
+
+def test_selection_scores_count_falls_against_every_task():
+    from hexa_mjx.tasks import TASKS
+
+    row = {"success_rate": 1.0, "goals_per_episode": 5.0, "fall_rate": 0.0, "episode_length": 1000.0,
+           "eval/episode_reward/tracking_lin_vel": 10_000.0, "eval/episode_reward/tracking_ang_vel": 5_000.0}
+    scales = {"tracking_lin_vel": 10.0, "tracking_ang_vel": 5.0}
+    for name, task in TASKS.items():
+        assert task.selection_score({**row, "fall_rate": 0.5}, scales) < task.selection_score(row, scales), name

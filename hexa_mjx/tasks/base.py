@@ -113,6 +113,12 @@ class Task:
         reward `scales`."""
         return f"goal bonus {row['goal_bonus']:7.1f}"
 
+    @classmethod
+    def selection_score(cls, row: dict, scales: dict) -> float:
+        """How good an evaluation row is, higher better: what `RUN/best` picks a checkpoint by
+        (hexa_mjx.training.selection). Here the share of episodes ended at the goal, less falls."""
+        return row["success_rate"] - row["fall_rate"]
+
     def evaluation(self, env, start_qpos, traj, alive, fell) -> tuple[dict, dict]:
         """The task's own figures for eval.py: (summary entries, per-episode entries)."""
         return {}, {}

@@ -93,6 +93,10 @@ class NavigateTask(Task):
         return f"goals {row['goals_per_episode']:.2f}"
 
     @classmethod
+    def selection_score(cls, row: dict, scales: dict) -> float:
+        return row["goals_per_episode"] * (1.0 - row["fall_rate"])
+
+    @classmethod
     def table_rows(cls, summary: dict) -> list[tuple[str, str]]:
         from hexa_mjx.evaluation import nav_metrics
 

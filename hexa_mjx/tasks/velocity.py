@@ -160,12 +160,23 @@ class VelocityTask(Task):
 
     # -- figures --------------------------------------------------------------
 
-    @classmethod
-    def progress_figure(cls, row: dict, scales: dict) -> str:
+    @staticmethod
+    def tracking(row: dict, scales: dict) -> tuple[float, float]:
+        """The planar and yaw-rate tracking terms' mean per step (1: on the command) of an evaluation row."""
         steps = row.get("episode_length") or np.nan  # the row's terms are scaled: divided back
         lin = row.get("eval/episode_reward/tracking_lin_vel", np.nan) / scales["tracking_lin_vel"] / steps
         ang = row.get("eval/episode_reward/tracking_ang_vel", np.nan) / scales["tracking_ang_vel"] / steps
+        return lin, ang
+
+    @classmethod
+    def progress_figure(cls, row: dict, scales: dict) -> str:
+        lin, ang = cls.tracking(row, scales)
         return f"tracking v {lin:.2f} yaw {ang:.2f}"
+
+    @classmethod
+    def selection_score(cls, row: dict, scales: dict) -> float:
+        lin, ang = cls.tracking(row, scales)
+        return (lin + ang) / 2 * (1.0 - row["fall_rate"])
 
     def evaluation(self, env, start_qpos, traj, alive, fell):
         from hexa_mjx.evaluation import tracking  # evaluation-only figures

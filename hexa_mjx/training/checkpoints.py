@@ -209,8 +209,14 @@ def load_latest(run_dir: Path, template, optimizer_template=None):
 
 
 def resolve_checkpoint(path: Path) -> tuple[Path, Path]:
-    """(run dir, checkpoint dir) for a run directory (its latest checkpoint) or one checkpoint."""
+    """(run dir, checkpoint dir) for a run directory (its latest checkpoint), one checkpoint, or
+    `RUN/best`, the checkpoint its evaluations chose (hexa_mjx.training.selection)."""
     path = Path(path)
+    if path.name == "best" and not path.exists() and (path.parent / "config.json").is_file():
+        from hexa_mjx.training import selection  # reads the run's task: imported only when asked
+
+        step, _ = selection.best_step(path.parent)
+        return path.parent, checkpoint_dir(path.parent) / f"{step:012d}"
     if (path / "step.json").is_file():
         return path.parent.parent, path
     if (path / "config.json").is_file():

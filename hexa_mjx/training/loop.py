@@ -19,7 +19,7 @@ import jax
 import jax.numpy as jp
 from flax import linen
 
-from hexa_mjx.training import distributed, crash_points as faults, ppo, resume as exact
+from hexa_mjx.training import distributed, crash_points as faults, ppo, resume as exact, selection
 from hexa_mjx.mdp import randomization
 from hexa_mjx.training.checkpoints import (checkpoint_dir, list_checkpoints, load_checkpoint, load_latest, load_resume,
                                            remove_temporaries, save_checkpoint)
@@ -285,4 +285,7 @@ def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
               if logger.task.has_goal or not last else logger.task.progress_figure(last, logger.scales))
     print(f"done: {cfg.num_timesteps:,} steps in {total / 60:.1f} min; last evaluation: {figure}, "
           f"return {last.get('episode_return', math.nan):.1f}; checkpoints in {checkpoint_dir(run_dir)}")
+    with contextlib.suppress(FileNotFoundError):  # none when the run saved no checkpoint with a row
+        best, _ = selection.best_step(run_dir)
+        print(f"the evaluations chose step {best:,}: {run_dir / selection.BEST} (hexa_mjx.training.selection)")
     return last
