@@ -27,6 +27,7 @@ import numpy as np
 from hexa_mjx.training import crash_points as faults
 
 OPTIMIZER_FILE = "optimizer.npz"
+BEST = "best"  # RUN/best: the checkpoint the run's evaluations chose (hexa_mjx.training.selection)
 RESUME_FILE = "resume.npz"  # keys and environment state for an exact resume (hexa_mjx.training.resume)
 
 
@@ -212,7 +213,7 @@ def resolve_checkpoint(path: Path) -> tuple[Path, Path]:
     """(run dir, checkpoint dir) for a run directory (its latest checkpoint), one checkpoint, or
     `RUN/best`, the checkpoint its evaluations chose (hexa_mjx.training.selection)."""
     path = Path(path)
-    if path.name == "best" and not path.exists() and (path.parent / "config.json").is_file():
+    if path.name == BEST and not path.exists() and (path.parent / "config.json").is_file():
         from hexa_mjx.training import selection  # reads the run's task: imported only when asked
 
         step, _ = selection.best_step(path.parent)

@@ -21,8 +21,8 @@ from flax import linen
 
 from hexa_mjx.training import distributed, crash_points as faults, ppo, resume as exact, selection
 from hexa_mjx.mdp import randomization
-from hexa_mjx.training.checkpoints import (checkpoint_dir, list_checkpoints, load_checkpoint, load_latest, load_resume,
-                                           remove_temporaries, save_checkpoint)
+from hexa_mjx.training.checkpoints import (BEST, checkpoint_dir, list_checkpoints, load_checkpoint, load_latest,
+                                           load_resume, remove_temporaries, save_checkpoint)
 from hexa_mjx.training.config import TrainConfig, init_checkpoint, make_env_for, validate
 from hexa_mjx.mdp.curriculum import level_summary
 from hexa_mjx.mdp.failure_schedule import schedule_summary
@@ -287,5 +287,5 @@ def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
           f"return {last.get('episode_return', math.nan):.1f}; checkpoints in {checkpoint_dir(run_dir)}")
     with contextlib.suppress(FileNotFoundError):  # none when the run saved no checkpoint with a row
         best, _ = selection.best_step(run_dir)
-        print(f"the evaluations chose step {best:,}: {run_dir / selection.BEST} (hexa_mjx.training.selection)")
+        print(f"the evaluations chose step {best:,}: {run_dir / BEST} (hexa_mjx.training.selection)")
     return last

@@ -68,6 +68,23 @@ def summarize(metrics: dict) -> dict:
     }
 
 
+def read_rows(run_dir: Path) -> tuple[list[dict], int]:
+    """metrics.jsonl's evaluation rows in file order (none without the file), and how many other
+    non-empty lines it has (cut short by a crash, or damaged)."""
+    path = Path(run_dir) / "metrics.jsonl"
+    rows, dropped = [], 0
+    for line in path.read_text(errors="replace").splitlines() if path.is_file() else []:
+        try:
+            row = json.loads(line)
+        except json.JSONDecodeError:
+            row = None
+        if isinstance(row, dict) and isinstance(row.get("step"), int):
+            rows.append(row)
+        else:
+            dropped += bool(line.strip())
+    return rows, dropped
+
+
 def keep_rows_up_to(run_dir: Path, step: int) -> set[int]:
     """Rewrite metrics.jsonl with one row per evaluation step up to `step` (the checkpoint a run
     resumes from): rows of a later step, written before a crash lost their checkpoint, would be
@@ -75,15 +92,9 @@ def keep_rows_up_to(run_dir: Path, step: int) -> set[int]:
     path = Path(run_dir) / "metrics.jsonl"
     if not path.is_file():
         return set()
-    kept, lines, dropped = set(), [], 0
-    for line in path.read_text(errors="replace").splitlines():
-        try:
-            row = json.loads(line)
-        except json.JSONDecodeError:  # a line cut short by a crash, or damaged
-            row = None
-        if not (isinstance(row, dict) and isinstance(row.get("step"), int)):
-            dropped += bool(line.strip())
-            continue
+    kept, lines = set(), []
+    rows, dropped = read_rows(run_dir)
+    for row in rows:
         if row["step"] <= step and row["step"] not in kept:
             kept.add(row["step"])
             lines.append(json.dumps(row))

@@ -14,11 +14,8 @@ eval.py's larger evaluation before trusting it.
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
-
-BEST = "best"  # the last part of the path that asks for the chosen checkpoint
 
 
 def scored_rows(run_dir: Path) -> list[tuple[int, float]]:
@@ -26,21 +23,17 @@ def scored_rows(run_dir: Path) -> list[tuple[int, float]]:
     from hexa_mjx.tasks import task_class
     from hexa_mjx.training import checks, config
     from hexa_mjx.training.checkpoints import list_checkpoints
+    from hexa_mjx.training.progress import read_rows
 
     cfg = config.load_config(run_dir)
     task, scales = task_class(cfg.task), checks.run_scales(cfg)
     saved = {step for step, _ in list_checkpoints(run_dir)}
-    path = Path(run_dir) / "metrics.jsonl"
-    rows = {}
-    for line in (path.read_text(errors="replace").splitlines() if path.is_file() else []):
-        try:
-            row = json.loads(line)
-        except json.JSONDecodeError:  # a line cut short by a crash
-            continue
-        if isinstance(row, dict) and row.get("step") in saved:
+    scores = {}
+    for row in read_rows(run_dir)[0]:
+        if row["step"] in saved:
             score = float(task.selection_score(row, scales))
-            rows[row["step"]] = score if math.isfinite(score) else -math.inf
-    return sorted(rows.items())
+            scores[row["step"]] = score if math.isfinite(score) else -math.inf
+    return sorted(scores.items())
 
 
 def best_step(run_dir: Path) -> tuple[int, float]:
