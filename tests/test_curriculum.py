@@ -1,5 +1,5 @@
-"""The navigation curriculum: the level rule, goal ranges per level, levels kept across episodes
-and reported to the host."""
+"""The curriculum: the level rules (navigation's goals, the velocity task's terrain), goal ranges
+per level, levels kept across episodes and reported to the host."""
 
 import jax
 import jax.numpy as jp
@@ -12,18 +12,35 @@ from hexa_mjx.mdp import curriculum
 from hexa_mjx.evaluation import nav_metrics
 from hexa_mjx.engines import wrappers
 from hexa_mjx.engines.mjx_env import DRAWS
+from hexa_mjx.mdp.config import EnvConfig
+from hexa_mjx.tasks.velocity import VelocityTask
 
 LEVELS = 4
 
 
-def test_level_rule():
-    up = curriculum.next_level(jp.int32(1), LEVELS, jp.bool_(True), jp.bool_(False), jp.bool_(False))
-    top = curriculum.next_level(jp.int32(LEVELS - 1), LEVELS, jp.bool_(True), jp.bool_(False), jp.bool_(False))
-    down = curriculum.next_level(jp.int32(2), LEVELS, jp.bool_(False), jp.bool_(True), jp.bool_(True))
-    bottom = curriculum.next_level(jp.int32(0), LEVELS, jp.bool_(False), jp.bool_(True), jp.bool_(True))
-    kept = curriculum.next_level(jp.int32(2), LEVELS, jp.bool_(False), jp.bool_(True), jp.bool_(False))
-    mid_episode = curriculum.next_level(jp.int32(2), LEVELS, jp.bool_(False), jp.bool_(False), jp.bool_(True))
-    assert [int(x) for x in (up, top, down, bottom, kept, mid_episode)] == [2, LEVELS - 1, 1, 0, 2, 2]
+def _next_level(task, level, completed=False, over=False, fell=False, goals=0):
+    up, down = task.level_moves(jp.bool_(completed), jp.bool_(over), jp.bool_(fell), jp.int32(goals))
+    return int(curriculum.next_level(jp.int32(level), LEVELS, up, down))
+
+
+def test_level_rule(cur_env):
+    task = cur_env.task
+    assert _next_level(task, 1, completed=True, goals=1) == 2  # a goal reached: up
+    assert _next_level(task, LEVELS - 1, completed=True, goals=1) == LEVELS - 1  # no level above the top
+    assert _next_level(task, 2, over=True, fell=True, goals=1) == 1  # a fall: down
+    assert _next_level(task, 0, over=True, fell=True) == 0  # no level below the bottom
+    assert _next_level(task, 2, over=True, goals=1) == 2  # the time ran out after a goal: kept
+    assert _next_level(task, 2, over=True) == 1  # ... without a goal: down
+    assert _next_level(task, 2, goals=0) == 2  # mid-episode: kept
+
+
+def test_velocity_levels_move_by_lasting_the_episode():
+    task = VelocityTask(EnvConfig(task="velocity"), robot=None)
+    assert _next_level(task, 2, over=True) == 3  # ran its full length: up, with no goal to reach
+    assert _next_level(task, 2, over=True, fell=True) == 1  # a fall: down
+    assert _next_level(task, 2) == 2  # mid-episode: kept
+    with pytest.raises(ValueError, match="grade the terrain"):
+        hexa_mjx.make_env(task="velocity", curriculum_levels=LEVELS)  # flat ground has nothing to grade
 
 
 @pytest.fixture(scope="module")
@@ -76,8 +93,8 @@ def test_training_environments_keep_their_level_and_report_it(cur_env):
     assert summary["curriculum/level_mean"] == (0 + 1 + 1 + LEVELS - 1) / 4
 
 
-def test_only_random_navigation_goals_have_a_curriculum():
-    with pytest.raises(ValueError, match="navigate task's random goals only"):
+def test_only_random_navigation_goals_and_velocity_terrain_have_a_curriculum():
+    with pytest.raises(ValueError, match="the goal task has none"):
         hexa_mjx.make_env(task="goal", curriculum_levels=LEVELS)
     with pytest.raises(ValueError, match="navigate task's random goals only"):
         hexa_mjx.make_env(task="navigate", curriculum_levels=LEVELS, waypoints=[(1, 0)])

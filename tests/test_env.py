@@ -353,6 +353,43 @@ def test_random_leg_failure_is_drawn_per_episode():
     assert abs(failed.sum(1).mean() - 0.5) < 0.05 and failed.sum(0).min() > 100  # every leg fails sometimes
 
 
+def test_two_non_adjacent_legs_and_mixed_failures_in_both_engines():
+    from hexa_mjx.engines.native import NativeEnv
+    env = hexa_mjx.make_env(leg_failure="random", leg_failure_rate=1.0, leg_failure_pairs=0.5, failure_mode="mixed")
+    # The hips sit on a hexagon around the torso: adjacent legs are its 6 sides, the shortest hip
+    # to hip distances; the 9 non-adjacent pairs are its diagonals, every one longer.
+    data = mujoco.MjData(env.mj_model)
+    data.qpos[:] = env.robot.qpos0
+    mujoco.mj_forward(env.mj_model, data)
+    hips = data.xanchor[env.robot.hips, :2]
+    diagonals = {tuple(p) for p in env.robot.non_adjacent_pairs}
+    sides = {(i, j) for i in range(6) for j in range(i + 1, 6)} - diagonals
+    assert len(diagonals) == 9 and len(sides) == 6
+    length = lambda pair: np.linalg.norm(hips[pair[0]] - hips[pair[1]])  # noqa: E731
+    assert max(map(length, sides)) < min(map(length, diagonals))
+    info = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(0), 2000)).info
+    failed, locked = np.asarray(info["failed_legs"]), np.asarray(info["failure_locked"])
+    counts = failed.sum(1)
+    assert set(counts.tolist()) == {1.0, 2.0} and abs((counts == 2).mean() - 0.5) < 0.05
+    pairs = {tuple(np.flatnonzero(row)) for row in failed[counts == 2]}
+    assert pairs == diagonals  # every non-adjacent pair, no other
+    assert set(locked.tolist()) == {0.0, 1.0} and abs(locked.mean() - 0.5) < 0.05
+    first_locked = jax.tree.map(lambda x: x[int(np.flatnonzero(locked == 1)[0])], info)
+    np.testing.assert_array_equal(np.unique(env.episode.failed_servos(first_locked)), [0, 2])  # 2: locked
+    native = NativeEnv(env.config)
+    seen = set()
+    for seed in range(60):
+        native.reset(seed=seed)
+        legs = tuple(np.flatnonzero(native.info["failed_legs"]))
+        assert len(legs) == 1 or legs in pairs
+        seen.add((len(legs), float(native.info["failure_locked"])))
+    assert seen == {(1, 0.0), (1, 1.0), (2, 0.0), (2, 1.0)}
+    # Mixed: a failed servo is limp (follows its joint) or locked (holds the start pose) by episode.
+    from hexa_mjx.robot.model import failed_ctrl
+    target, joints, hold = np.full(3, 0.5), np.full(3, 0.1), np.full(3, -0.2)
+    np.testing.assert_array_equal(failed_ctrl(target, joints, np.array([0, 1, 2]), "mixed", hold), [0.5, 0.1, -0.2])
+
+
 def test_leg_failure_weights_pick_the_failed_leg_in_both_engines():
     from hexa_mjx.engines.native import NativeEnv
     weights = (0, 0, 3, 1, 0, 0)  # legs 3 and 4 only, 3 three times as often
@@ -377,7 +414,8 @@ def test_leg_failure_weights_pick_the_failed_leg_in_both_engines():
     (dict(disabled_legs=(0,)), "leg numbers from 1"),
     (dict(disabled_legs=(2, 2)), "names a leg twice"),
     (dict(leg_failure="sometimes"), "leg_failure is 'none' or 'random'"),
-    (dict(failure_mode="broken"), "failure_mode is 'limp' or 'locked'"),
+    (dict(failure_mode="broken"), "failure_mode is 'limp', 'locked' or 'mixed'"),
+    (dict(leg_failure="random", leg_failure_pairs=1.5), "leg_failure_pairs is a share"),
     (dict(leg_failure="random", leg_failure_rate=1.5), "leg_failure_rate is a probability"),
 ])
 def test_leg_failure_settings_are_checked(settings, message):

@@ -261,3 +261,21 @@ def test_standing_still_scores_one_on_zero_commands_and_less_on_wider_ranges():
     narrow = tracking.standing_still(task(), draws=5000)
     wide = tracking.standing_still(task(command_vx=(-1.0, 2.0), command_yaw_rate=(-3.0, 3.0)), draws=5000)
     assert 0 < wide[0] < narrow[0] < 1 and 0 < wide[1] < narrow[1] < 1
+
+
+def test_the_generalist_battery_walks_the_square_and_stops_at_its_end():
+    from hexa_mjx.deploy import player
+    from hexa_mjx.robot.constants import REPO_ROOT
+    from hexa_mjx.studies import generalist, robustness
+
+    shipped = str(REPO_ROOT / "policies" / "velocity.onnx")
+    groups = [group for group, *_ in generalist.conditions(player.OnnxPolicy(shipped), terrain_seed=1)]
+    # flat; bumps, 15-degree slopes, stairs; pushes; 8 physics corners; 6 legs x limp, locked; 9 pairs
+    assert [groups.count(g) for g in generalist.TARGETS] == [1, 3, 1, 8, 12, 9]
+    [flat] = robustness.run_conditions(shipped, [({**generalist.FLAT, "episode_length": 1800}, None)], 1,
+                                       path=generalist.SQUARE)
+    # 8 m at the follower's 0.5 m/s: about 16 s; an episode run to its 30 s end would say 30 s
+    assert flat["path_completed_rate"] == 1.0 and 12 < flat["path_time_s_median"] < 25
+    row = {"group": "one leg", "path_completed_rate": 0.95, "speed_share_of_intact": 0.69, "fall_rate": 0.0}
+    assert not generalist.meets(row) and generalist.meets({**row, "speed_share_of_intact": 0.7})
+    assert not generalist.meets({**row, "group": "flat", "speed_share_of_intact": None, "fall_rate": 0.03})

@@ -109,10 +109,14 @@ class PathFollower:
     """Pure pursuit on commands: walk toward the point `lookahead` m along the path from the torso's
     nearest point on it, at `speed` m/s slowing over the last `slow_within` m, turned by
     `turn_gain` toward the direction of travel; stand still within `stop_within` m of the end.
-    Waypoints are world (x, y), m; the path starts at the torso's position at `reset`."""
+    Waypoints are world (x, y), m; the path starts at the torso's position at `reset`. With
+    `ends_episode`, `finished` turns true once the last waypoint counts (player.run_episode stops
+    there); otherwise the robot stands at the end until the episode's time runs out."""
 
     def __init__(self, waypoints, ranges, speed: float = 0.5, lookahead: float = 0.4, turn_gain: float = 1.5,
-                 slow_within: float = 0.5, stop_within: float = 0.1, success_radius: float = 0.5):
+                 slow_within: float = 0.5, stop_within: float = 0.1, success_radius: float = 0.5,
+                 ends_episode: bool = False):
+        self.ends_episode = ends_episode
         self.waypoints = np.asarray(waypoints, float).reshape(-1, 2)
         self.ranges, self.speed, self.lookahead, self.turn_gain = ranges, speed, lookahead, turn_gain
         self.slow_within, self.stop_within, self.success_radius = slow_within, stop_within, success_radius
@@ -121,6 +125,11 @@ class PathFollower:
     def reset(self, start_xy) -> None:
         self.corners = np.vstack([np.asarray(start_xy, float)[None], self.waypoints])
         self.segment, self.reached = 0, 0
+
+    @property
+    def finished(self) -> bool:
+        """Whether the episode should end here: every waypoint counted, with `ends_episode`."""
+        return self.ends_episode and self.reached == len(self.waypoints)
 
     @property
     def goal(self) -> np.ndarray:

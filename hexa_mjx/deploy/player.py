@@ -96,7 +96,8 @@ def run_episode(policy: OnnxPolicy, env: NativeEnv, seed: int, record: bool = Fa
     """One deterministic episode from the start drawn by `seed`; `record` keeps qpos and goal per
     step. `source(t, env) -> (vx, vy, yaw rate)` (hexa_mjx.deploy.commands) drives a velocity
     policy instead of the task's own random commands; a source with a `goal` (the path follower)
-    also moves the goal marker. Velocity policies record their commands and velocities."""
+    also moves the goal marker, and one that is `finished` ends the episode. Velocity policies
+    record their commands and velocities."""
     obs = env.reset(seed=seed)
     if hasattr(source, "reset"):
         source.reset(env.data.qpos[:2])
@@ -125,7 +126,7 @@ def run_episode(policy: OnnxPolicy, env: NativeEnv, seed: int, record: bool = Fa
         if record or commanding:
             qpos.append(env.data.qpos.copy())
             goals.append(env.goal)
-        if terminated or truncated:
+        if terminated or truncated or getattr(source, "finished", False):
             break
     result = {"seed": seed, "success": bool(info["success"]), "final_distance": info["distance"],
               "fell": info["fell"], "nonfinite": info["nonfinite"], "goals_reached": info["goals_reached"],
@@ -133,6 +134,8 @@ def run_episode(policy: OnnxPolicy, env: NativeEnv, seed: int, record: bool = Fa
               "first_arrival_s": first_arrival, "first_goal_distance": start_goal_dist}
     if hasattr(source, "reached"):
         result["waypoints_reached"] = source.reached
+        result["path_completed"] = source.reached == len(source.waypoints)
+        result["path_time_s"] = steps * env.dt if result["path_completed"] else None
     if commanding:
         from hexa_mjx.evaluation.tracking import episode_errors
 
@@ -172,7 +175,12 @@ def summarize(episodes: list[dict]) -> dict:
     # Speed to the first goal: its start distance over the time to first enter the radius, m/s.
     speeds = [e["first_goal_distance"] / e["first_arrival_s"] for e in episodes if e["first_arrival_s"]]
     tracked = [e["velocity_rms"] for e in episodes if e.get("velocity_rms") is not None]
-    return {"episodes": len(episodes), "success_rate": mean("success"), "fall_rate": mean("fell"),
+    path = {}
+    if all("path_completed" in e for e in episodes):  # walked a path through the follower
+        times = [e["path_time_s"] for e in episodes if e["path_completed"]]
+        path = {"path_completed_rate": mean("path_completed"),
+                "path_time_s_median": float(np.median(times)) if times else None}
+    return {"episodes": len(episodes), "success_rate": mean("success"), "fall_rate": mean("fell"), **path,
             "velocity_rms_mean": float(np.mean(tracked)) if tracked else None,
             "nonfinite_rate": mean("nonfinite"), "final_distance_mean": mean("final_distance"),
             "goals_per_episode": mean("goals_reached"), "feet_only_share": mean("feet_only_share"),

@@ -200,7 +200,8 @@ class HexapodEnv(Env):
 
     def draw_failure(self, rng: jax.Array, rate=None, p=None) -> jax.Array:
         """An episode's failed legs, (legs,) of 0/1 (`hexa_mjx.mdp.events.draw_failure`)."""
-        return events.draw_failure(self.config, len(self.robot.legs), DRAWS, rng, rate, p)
+        return events.draw_failure(self.config, len(self.robot.legs), DRAWS, rng, rate, p,
+                                   self.robot.non_adjacent_pairs)
 
     def restart(self, data: mjx.Data, rng: jax.Array, level=0) -> mjx.Data:
         """`data` with a fresh start state (qpos, qvel, ctrl, time) and first goal drawn with `rng`

@@ -59,11 +59,12 @@ class EnvConfig:
     # Navigation: the observed distance is capped here (0: goal_max_distance). A policy keeps the
     # cap it was trained with when evaluated on another range.
     goal_distance_cap: float = 0.0  # m
-    # Navigation, training only: hexa_mjx.mdp.curriculum; on a terrain the level also picks the
-    # column of terrain squares it starts on (hexa_mjx.mdp.terrain).
-    curriculum_levels: int = setting(0, "navigate: a curriculum of this many levels (0: none); each environment's "
-                                        "goals start near and ahead, and the bearing and distance ranges open as it "
-                                        "reaches goals (hexa_mjx.mdp.curriculum)")
+    # Training only: hexa_mjx.mdp.curriculum; on a terrain the level also picks the column of
+    # terrain squares an episode starts on (hexa_mjx.mdp.terrain).
+    curriculum_levels: int = setting(0, "a curriculum of this many levels (0: none), training only: navigate's "
+                                        "goals start near and ahead and their ranges open as an environment reaches "
+                                        "goals; on a terrain each level starts on harder squares (velocity: up a "
+                                        "level for an episode without a fall; hexa_mjx.mdp.curriculum)")
     waypoints: tuple = setting((), "navigate: walk a path instead, \"x,y x,y ...\" in metres from the start, world "
                                    "frame, or a file holding that; the last waypoint stays the goal")
     # Velocity commands (hexa_mjx.tasks.velocity): (vx, vy, yaw rate) in the heading frame, drawn
@@ -87,8 +88,11 @@ class EnvConfig:
     leg_failure_weights: tuple = setting((), "relative chance of each leg (1, 2, ...) being the failed one "
                                              "(--leg_failure random), e.g. 1 1 3 3 1 1 (default: uniform)",
                                          nargs="+", type=float)
-    failure_mode: str = setting("limp", "a failed leg's servos give no torque (limp) or hold the start angles "
-                                        "(locked)", choices=["limp", "locked"])
+    failure_mode: str = setting("limp", "a failed leg's servos give no torque (limp), hold the start angles "
+                                        "(locked), or either with even odds, drawn per episode (mixed)",
+                                choices=["limp", "locked", "mixed"])
+    leg_failure_pairs: float = setting(0.0, "share of the failing episodes (--leg_failure random) in which two "
+                                            "non-adjacent legs fail instead of one, the pair drawn uniformly")
     push_speed: float = setting(0.0, "m/s, pushes: the torso's planar velocity is kicked by up to this every "
                                      "--push_interval in a random direction (0: none)")
     push_interval: float = setting(3.0, "s between pushes")
@@ -156,8 +160,10 @@ def check_config(config: EnvConfig) -> None:
         raise ValueError(f"obs_noise is a multiple of the noise scales from 0 to 10, got {config.obs_noise}")
     if config.leg_failure not in ("none", "random"):
         raise ValueError(f"leg_failure is 'none' or 'random', got {config.leg_failure!r}")
-    if config.failure_mode not in ("limp", "locked"):
-        raise ValueError(f"failure_mode is 'limp' or 'locked', got {config.failure_mode!r}")
+    if config.failure_mode not in ("limp", "locked", "mixed"):
+        raise ValueError(f"failure_mode is 'limp', 'locked' or 'mixed', got {config.failure_mode!r}")
+    if not (math.isfinite(config.leg_failure_pairs) and 0 <= config.leg_failure_pairs <= 1):
+        raise ValueError(f"leg_failure_pairs is a share of the failing episodes in [0, 1], got {config.leg_failure_pairs}")
     if not 0 <= config.leg_failure_rate <= 1:
         raise ValueError(f"leg_failure_rate is a probability in [0, 1], got {config.leg_failure_rate}")
     weights = config.leg_failure_weights

@@ -1,4 +1,4 @@
-"""The navigation curriculum: goals near and ahead first, widened per environment as it succeeds.
+"""The curriculum: goals near and ahead first, widened per environment as it succeeds; harder ground.
 
 In the style of legged_gym's terrain curriculum, each training environment has a difficulty
 level, kept in `state.info["level"]` across its episodes (brax's auto-reset carries `info` over).
@@ -7,6 +7,10 @@ With `curriculum_levels` = N, an environment at level l (0 to N-1) draws goals o
 distances from the range's start up to that fraction of the way to its end. Level N-1 is the
 full task. Each goal reached moves the environment up one level; an episode that ends in a fall,
 or without reaching any goal, moves it down one. Every environment starts at level 0.
+
+The velocity task has no goals: on a terrain its level grades the ground only, up one for an
+episode that lasts its full length, down one for a fall (`VelocityTask.level_moves`). Each task
+says how its levels move (`Task.level_moves`).
 
 Evaluation always uses the full ranges: the curriculum is a setting of the training environment
 only. Each evaluation row says how the training environments are spread over the levels
@@ -27,11 +31,11 @@ def range_fraction(level, levels: int):
     return (level + 1) / levels
 
 
-def next_level(level, levels: int, reached_goal, episode_over, episode_failed):
-    """One environment's level after a step: +1 for a goal reached, -1 for an episode that ended in
-    a fall or without a goal, kept within [0, levels - 1]."""
+def next_level(level, levels: int, up, down):
+    """One environment's level after a step: +1 where `up`, -1 where `down` (the task's
+    `level_moves`), kept within [0, levels - 1]."""
     xp = namespace(level)
-    change = reached_goal.astype(xp.int32) - (episode_over & episode_failed).astype(xp.int32)
+    change = up.astype(xp.int32) - down.astype(xp.int32)
     return xp.clip(level + change, 0, levels - 1)
 
 

@@ -77,10 +77,12 @@ class Episode:
         xp, legs = draws.xp, len(self.robot.legs)
         return {"t": xp.zeros((), xp.int32), "success": xp.zeros(()), "goals": xp.zeros((), xp.int32),
                 "level": xp.zeros((), xp.int32),  # the curriculum's level, kept across episodes
-                "failed_legs": events.draw_failure(self.config, legs, draws, draws.fold_in(key, 3)),
+                "failed_legs": events.draw_failure(self.config, legs, draws, draws.fold_in(key, 3),
+                                                   pairs=self.robot.non_adjacent_pairs),
                 "air_time": xp.zeros(legs),  # s since each foot last touched the floor
                 "stance_avg": xp.ones(legs),  # running share of time on the floor (all down)
-                "latency": events.draw_latency(self.config.action_latency, draws, draws.fold_in(key, 4))}
+                "latency": events.draw_latency(self.config.action_latency, draws, draws.fold_in(key, 4)),
+                **self._failure_kind(draws, key)}
 
     # -- one control step -----------------------------------------------------
 
@@ -89,9 +91,19 @@ class Episode:
         obs = self.observer.observe(qpos, qvel, ctrl, goal, heading, command)
         return events.noisy(obs, self.noise_scale, draws, key) if self.config.obs_noise else obs
 
+    def _failure_kind(self, draws, key) -> dict:
+        """{"failure_locked": 0/1} of a new episode under failure_mode "mixed"; nothing otherwise."""
+        if self.config.failure_mode != "mixed":
+            return {}
+        return {"failure_locked": events.draw_locked(self.config, draws, draws.fold_in(key, 9))}
+
     def failed_servos(self, info):
-        """Whether each actuator's leg has failed this episode."""
-        return info["failed_legs"][self.robot.actuator_leg] > 0
+        """Whether each actuator's leg has failed this episode; under failure_mode "mixed", how
+        (0 working, 1 limp, 2 locked)."""
+        failed = info["failed_legs"][self.robot.actuator_leg] > 0
+        if self.config.failure_mode == "mixed":
+            return failed * (1 + info["failure_locked"]).astype(namespace(failed).int32)
+        return failed
 
     def delay(self, info):
         """Physics steps of each control step for which the previous command still holds."""
@@ -133,7 +145,8 @@ class Episode:
         goals = info["goals"] + completed
         level = info["level"]
         if cfg.curriculum_levels:
-            level = curriculum.next_level(level, cfg.curriculum_levels, completed, over, done | (goals == 0))
+            up, down = self.task.level_moves(completed, over, done, goals)
+            level = curriculum.next_level(level, cfg.curriculum_levels, up, down)
         # A new goal is drawn only on the step that completes one (native MuJoCo draws nothing else).
         next_goal = draws.select(completed, lambda: self.task.next_goal(qpos, goal, goals, draws, key, level),
                                  lambda: goal)
@@ -153,10 +166,12 @@ class Episode:
         """`info` for the step after: a new episode's where `over` (brax's auto-reset keeps `info`,
         so the next episode's leg failure and latency are drawn here), the curriculum level kept."""
         xp = draws.xp
-        failed = events.draw_failure(self.config, len(self.robot.legs), draws, draws.fold_in(key, 3), rate, p)
+        failed = events.draw_failure(self.config, len(self.robot.legs), draws, draws.fold_in(key, 3), rate, p,
+                                     self.robot.non_adjacent_pairs)
         latency = events.draw_latency(self.config.action_latency, draws, draws.fold_in(key, 4))
+        kind = {name: xp.where(over, value, info[name]) for name, value in self._failure_kind(draws, key).items()}
         return {**info, "t": xp.where(over, 0, info["t"]), "success": xp.where(over, 0.0, info["success"]),
                 "goals": xp.where(over, 0, info["goals"]),
                 "failed_legs": xp.where(over, failed, info["failed_legs"]),
                 "air_time": xp.where(over, 0.0, info["air_time"]), "stance_avg": xp.where(over, 1.0, info["stance_avg"]),
-                "latency": xp.where(over, latency, info["latency"])}
+                "latency": xp.where(over, latency, info["latency"]), **kind}

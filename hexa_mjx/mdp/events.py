@@ -67,10 +67,12 @@ def servo_ctrl(step, delay, target, previous, joint_angles, failed, config, hold
     return ctrl
 
 
-def draw_failure(config, legs: int, draws, key, rate=None, p=None):
-    """An episode's failed legs, (legs,) of 0/1: the fixed `disabled_legs`, or one leg drawn
-    (uniformly, or by `leg_failure_weights`) with probability `leg_failure_rate`. A training
-    schedule (`hexa_mjx.mdp.failure_schedule`) passes its own `rate` and leg probabilities `p`."""
+def draw_failure(config, legs: int, draws, key, rate=None, p=None, pairs=()):
+    """An episode's failed legs, (legs,) of 0/1: the fixed `disabled_legs`, or with probability
+    `leg_failure_rate` one leg drawn (uniformly, or by `leg_failure_weights`), or, in a share
+    `leg_failure_pairs` of those, two non-adjacent legs drawn uniformly from `pairs` ((n, 2) leg
+    indices). A training schedule (`hexa_mjx.mdp.failure_schedule`) passes its own `rate` and leg
+    probabilities `p`."""
     xp = draws.xp
     if config.leg_failure != "random":
         disabled = xp.asarray(config.disabled_legs or (0,), xp.int32) - 1
@@ -83,7 +85,19 @@ def draw_failure(config, legs: int, draws, key, rate=None, p=None):
         leg = draws.choice(k_which, legs, xp.asarray(config.leg_failure_weights, xp.float32))
     else:
         leg = draws.randint(k_which, 0, legs)
-    return (xp.arange(legs) == leg).astype(xp.float32) * fails
+    failed = xp.arange(legs) == leg
+    if config.leg_failure_pairs:
+        k_pair, k_two = draws.split(draws.fold_in(key, 2))
+        pair = xp.asarray(pairs)[draws.randint(k_pair, 0, len(pairs))]
+        two = (xp.arange(legs) == pair[0]) | (xp.arange(legs) == pair[1])
+        failed = xp.where(draws.uniform(k_two, (), 0.0, 1.0) < config.leg_failure_pairs, two, failed)
+    return failed.astype(xp.float32) * fails
+
+
+def draw_locked(config, draws, key):
+    """Whether an episode's failed legs are locked (1.0) or limp (0.0) under `failure_mode` "mixed":
+    even odds."""
+    return (draws.uniform(key, (), 0.0, 1.0) < 0.5).astype(draws.xp.float32)
 
 
 def finite(qpos, qvel):

@@ -45,7 +45,8 @@ def leg_probabilities(stats: jax.Array) -> jax.Array:
 def episode_stats(failed_legs: jax.Array, goals: jax.Array, ended: jax.Array) -> jax.Array:
     """(1 + legs, 2) sums over a batch of [goals reached, episodes] of the episodes that `ended`,
     by condition: intact, then each failed leg. `failed_legs` (batch, legs) is 0/1."""
-    condition = jp.concatenate([1.0 - failed_legs.sum(-1, keepdims=True), failed_legs], axis=-1)
+    intact = (failed_legs.sum(-1, keepdims=True) == 0).astype(jp.float32)
+    condition = jp.concatenate([intact, failed_legs], axis=-1)  # two failed legs count for each
     weight = ended.astype(jp.float32)[:, None] * condition
     return jp.stack([(weight * goals[:, None]).sum(0), weight.sum(0)], axis=-1)
 

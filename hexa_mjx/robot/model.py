@@ -111,6 +111,17 @@ class RobotModel:
         # m, hip axis to foot centre in the standing pose, mean over legs (for the Froude number)
         self.leg_length = float(np.mean(np.linalg.norm(data.xanchor[self.hips] - data.geom_xpos[self.feet], axis=1)))
         self.start_xy = self.qpos0[:2].copy()
+        # Legs in their order around the torso (the hips' bearings from its centre): two legs are
+        # adjacent when they are neighbours on that ring (--leg_failure_pairs fails two that are not).
+        hips = data.xanchor[self.hips, :2] - data.xpos[torso, :2]
+        ring = np.argsort(np.argsort(np.arctan2(hips[:, 1], hips[:, 0])))
+        n = len(self.legs)
+        self.non_adjacent_pairs = np.array([(i, j) for i in range(n) for j in range(i + 1, n)
+                                            if min((ring[i] - ring[j]) % n, (ring[j] - ring[i]) % n) > 1],
+                                           np.int32).reshape(-1, 2)  # leg indices from 0
+        if config.leg_failure_pairs and not len(self.non_adjacent_pairs):
+            raise ValueError(f"leg_failure_pairs fails two non-adjacent legs; this robot's {n} legs have no such pair: "
+                             "leave it at 0")
         self.hold_ctrl = self.qpos0[self.actuator_qpos].astype(np.float32)  # a locked leg's targets, rad
 
     def ground(self, xy):
@@ -150,8 +161,11 @@ def servo_power(actuator_force, qvel, actuator_dof):
 
 def failed_ctrl(target, joint_angles, failed_actuators, mode: str, hold):
     """Servo targets with failed actuators disabled: a limp servo's target follows its joint's
-    angle (no spring torque), a locked one's is `hold`. NumPy or JAX arrays."""
+    angle (no spring torque), a locked one's is `hold`. `mode` "mixed" reads which from
+    `failed_actuators` (0 working, 1 limp, 2 locked). NumPy or JAX arrays."""
     xp = namespace(target)
+    if mode == "mixed":  # each episode's failure is limp or locked: 1 limp, 2 locked, 0 working
+        return xp.where(failed_actuators == 2, hold, xp.where(failed_actuators == 1, joint_angles, target))
     return xp.where(failed_actuators, joint_angles if mode == "limp" else hold, target)
 
 

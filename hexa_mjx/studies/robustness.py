@@ -23,7 +23,9 @@ import multiprocessing
 import sys
 from pathlib import Path
 
-from hexa_mjx.deploy import player
+import numpy as np
+
+from hexa_mjx.deploy import commands, player
 from hexa_mjx.mdp import randomization, terrain
 
 NOMINAL = randomization.Ranges(friction=(1.0, 1.0), mass_scale=(1.0, 1.0), payload=(0.0, 0.0), kp_scale=(1.0, 1.0),
@@ -78,18 +80,23 @@ def settings(point: dict[str, float]) -> tuple[dict, randomization.Ranges | None
     return overrides, ranges
 
 
-def _episodes(policy_path: str, overrides: dict, ranges, seeds: list[int]) -> list[dict]:
+def _episodes(policy_path: str, overrides: dict, ranges, seeds: list[int], path=None) -> list[dict]:
     policy = player.OnnxPolicy(policy_path)
     env = player.env_for(policy, **overrides)
     if ranges is not None:
         env.ranges = ranges
-    return [player.run_episode(policy, env, s) for s in seeds]
+
+    def follower():  # a fresh one per episode: the path from the start, ended at its last waypoint
+        return commands.PathFollower(env.robot.start_xy + np.asarray(path), env.task.command_ranges,
+                                     success_radius=env.config.success_radius, ends_episode=True)
+    return [player.run_episode(policy, env, s, source=None if path is None else follower()) for s in seeds]
 
 
 def run_conditions(policy_path: str, conditions: list[tuple[dict, object]], episodes: int, seed: int = 0,
-                   workers: int = 1) -> list[dict]:
+                   workers: int = 1, path=None) -> list[dict]:
     """A summary (hexa_mjx.deploy.player.summarize) per condition (EnvConfig overrides, fixed physics
-    ranges or None), each over the same seeded episodes, run in `workers` processes."""
+    ranges or None), each over the same seeded episodes, run in `workers` processes. With a `path`
+    ((x, y) waypoints, m, from the start), a velocity policy walks it through the path follower."""
     policy = player.OnnxPolicy(policy_path)
     for overrides, _ in conditions:
         player.env_for(policy, **overrides)  # bad input fails here, before any episode runs
@@ -99,9 +106,9 @@ def run_conditions(policy_path: str, conditions: list[tuple[dict, object]], epis
     if workers > 1:
         # spawn, not fork: the caller may hold JAX's or onnxruntime's threads, which a fork copies mid-flight
         with concurrent.futures.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
-            results = list(pool.map(_episodes, *zip(*[(policy_path, o, r, s) for _, o, r, s in jobs])))
+            results = list(pool.map(_episodes, *zip(*[(policy_path, o, r, s, path) for _, o, r, s in jobs])))
     else:
-        results = [_episodes(policy_path, o, r, s) for _, o, r, s in jobs]
+        results = [_episodes(policy_path, o, r, s, path) for _, o, r, s in jobs]
     return [player.summarize([e for (j, *_), result in zip(jobs, results) if j == i for e in result])
             for i in range(len(conditions))]
 

@@ -41,8 +41,8 @@ class Task:
     def check(cls, config) -> None:
         """Raise ValueError for settings this task cannot run (before anything is built)."""
         if config.curriculum_levels:
-            raise ValueError(f"curriculum_levels applies to the navigate task's random goals only; the {cls.name} "
-                             "task has none: leave it at 0")
+            raise ValueError(f"curriculum_levels grades the navigate task's random goals and the velocity task's "
+                             f"terrain; the {cls.name} task has none: leave it at 0")
 
     # -- the episode ----------------------------------------------------------
 
@@ -67,6 +67,11 @@ class Task:
         """Whether this step completes a goal, given that the torso is within the radius (`reached`)
         and `goals` were completed earlier in the episode. Default: goals are never replaced."""
         return namespace(reached).zeros((), bool)
+
+    def level_moves(self, completed, over, fell, goals):
+        """(up, down) of the curriculum's level after a step (hexa_mjx.mdp.curriculum): up for a goal
+        completed, down for an episode that ended in a fall (`fell`) or without a goal."""
+        return completed, over & (fell | (goals == 0))
 
     def next_goal(self, qpos, goal, goals, draws, key, level=0):
         """The goal that follows `goals` completed ones, from the state that completed the last."""

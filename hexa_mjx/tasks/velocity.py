@@ -70,6 +70,18 @@ class VelocityTask(Task):
     uses_command = True
     has_goal = False
 
+    @classmethod
+    def check(cls, config) -> None:
+        if config.curriculum_levels and config.terrain == "flat":
+            raise ValueError("the velocity task's curriculum_levels grade the terrain (its commands keep their "
+                             "ranges); choose a --terrain, or leave it at 0 on flat ground")
+
+    def level_moves(self, completed, over, fell, goals):
+        """Up for an episode that ran its full length, down for a fall: on a terrain, a level's
+        squares are harder than the one below (legged_gym promotes by distance walked; here every
+        command, standing included, is walked for the whole episode, so lasting it is the test)."""
+        return over & ~fell, fell
+
     @property
     def start_yaw_range(self) -> float:
         return np.pi

@@ -82,6 +82,7 @@ class TrainConfig:
                                        "losing it costs the policy now (goals per episode against intact episodes, "
                                        "over the batch) instead of uniformly (hexa_mjx.mdp.failure_schedule)")
     failure_mode: str = env_field("failure_mode")
+    leg_failure_pairs: float = env_field("leg_failure_pairs")
     randomize: bool = field(ENV, False, "domain randomization: each environment its own friction, link masses, torso "
                             "payload, servo gain and force limit, joint damping and armature (ranges: "
                             "hexa_mjx.mdp.randomization.Ranges)")

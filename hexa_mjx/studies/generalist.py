@@ -1,0 +1,121 @@
+"""Every target of one policy for all of it, on native MuJoCo: a velocity policy walks the 2 m
+square through the path follower on flat ground, on rough ground, under pushes, at the corners of
+the physics grid and with failed legs.
+
+    python -m hexa_mjx.studies.generalist POLICY.onnx --episodes 32 --workers 2 --json out.json
+
+Each condition runs the same seeded starts (random heading, the policy's joint noise) with
+everything else nominal (no pushes, latency, noise or failures but the condition's own). An
+episode succeeds when the follower's last waypoint counts (within the success radius, in order)
+before the episode's time runs out (`--episode_length`, control steps); it ends there. Speed is
+the path's length over the median time of the completed episodes, and its share of the flat,
+intact robot's. Terrains are drawn at `--terrain_seed`, by default one the training never saw.
+Each group has its target (TARGETS); the table marks the conditions that miss it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+
+from hexa_mjx.deploy import player
+from hexa_mjx.studies.robustness import CLEAN, run_conditions, settings
+
+SQUARE = [(2.0, 0.0), (2.0, 2.0), (0.0, 2.0), (0.0, 0.0)]  # m from the start, world frame
+PATH_LENGTH = 8.0  # m, the square's perimeter
+FLAT = {**CLEAN, "terrain": "flat"}  # every condition's base: the policy may have trained on a terrain
+# Group -> (least success, least speed share of intact, most falls); None: no such target.
+TARGETS = {"flat": (0.95, None, 0.02), "rough": (0.90, None, None), "push": (None, None, 0.05),
+           "physics": (0.90, None, None), "one leg": (0.90, 0.70, None), "two legs": (0.75, None, None)}
+
+
+def conditions(policy: player.OnnxPolicy, terrain_seed: int) -> list[tuple[str, str, dict, object]]:
+    """(group, name, EnvConfig overrides, fixed physics ranges or None) of every condition."""
+    env = player.env_for(policy, **FLAT)
+    rows = [("flat", "flat, intact", {}, None)]
+    for name, kind in (("bumps 4 cm", "bumps"), ("slopes 15 deg", "steep"), ("stairs 5 cm", "stairs")):
+        rows.append(("rough", name, {"terrain": kind, "terrain_seed": terrain_seed, "terrain_difficulty": 1.0}, None))
+    rows.append(("push", "pushes up to 0.5 m/s", {"push_speed": 0.5}, None))
+    for friction in (0.4, 1.25):
+        for mass in (0.8, 1.2):
+            for payload in (0.0, 1.5):
+                _, ranges = settings({"friction": friction, "mass": mass, "payload": payload})
+                rows.append(("physics", f"friction {friction}, mass x{mass}, payload {payload} kg", {}, ranges))
+    for mode in ("limp", "locked"):
+        for leg in range(1, len(env.robot.legs) + 1):
+            rows.append(("one leg", f"leg {leg} {mode}", {"disabled_legs": (leg,), "failure_mode": mode}, None))
+    for i, j in env.robot.non_adjacent_pairs + 1:
+        rows.append(("two legs", f"legs {i} + {j} limp", {"disabled_legs": (int(i), int(j)), "failure_mode": "limp"},
+                     None))
+    return rows
+
+
+def battery(policy_path: str, episodes: int, seed: int = 0, workers: int = 1, terrain_seed: int = 1,
+            episode_length: int = 1800) -> list[dict]:
+    """One row per condition: its group, name, path figures (player.summarize) and speed share."""
+    policy = player.OnnxPolicy(policy_path)
+    if policy.metadata["env_config"].get("task") != "velocity":
+        raise ValueError(f"{policy_path} is not a velocity-task policy: the battery drives it with the path follower")
+    rows = conditions(policy, terrain_seed)
+    summaries = run_conditions(policy_path, [({**FLAT, "episode_length": episode_length, **o}, r)
+                                             for _, _, o, r in rows], episodes, seed, workers, path=SQUARE)
+    out = [{"group": group, "condition": name, **summary} for (group, name, _, _), summary in zip(rows, summaries)]
+    intact = out[0]["path_time_s_median"]
+    for row in out:
+        time = row["path_time_s_median"]
+        row["speed"] = PATH_LENGTH / time if time else None
+        row["speed_share_of_intact"] = intact / time if time and intact else None
+        row["meets_target"] = meets(row)
+    return out
+
+
+def meets(row: dict) -> bool:
+    """Whether a row meets its group's target (TARGETS)."""
+    success, share, falls = TARGETS[row["group"]]
+    return ((success is None or row["path_completed_rate"] >= success)
+            and (share is None or (row["speed_share_of_intact"] or 0.0) >= share)
+            and (falls is None or row["fall_rate"] <= falls))
+
+
+def table(rows: list[dict]) -> str:
+    """Markdown: one row per condition, a mark where it misses its group's target."""
+    lines = ["| group | condition | path completed | falls | speed | share of intact | target |",
+             "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        speed = "-" if r["speed"] is None else f"{r['speed']:.2f} m/s"
+        share = "-" if r["speed_share_of_intact"] is None else f"{r['speed_share_of_intact']:.0%}"
+        lines.append(f"| {r['group']} | {r['condition']} | {r['path_completed_rate']:.0%} | {r['fall_rate']:.0%} | "
+                     f"{speed} | {share} | {'met' if r['meets_target'] else 'MISSED'} |")
+    met = sum(r["meets_target"] for r in rows)
+    lines.append(f"\n{met} of {len(rows)} conditions meet their targets")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="python -m hexa_mjx.studies.generalist", description=__doc__.split("\n\n")[0])
+    p.add_argument("policy", help="exported velocity-task policy (.onnx)")
+    p.add_argument("--episodes", type=int, default=32, help="per condition")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--terrain_seed", type=int, default=1, help="the rough conditions' terrain")
+    p.add_argument("--episode_length", type=int, default=1800, help="control steps to finish the path in (30 s)")
+    p.add_argument("--workers", type=int, default=1, help="processes that share the episodes")
+    p.add_argument("--json", default="", help="write the rows here")
+    args = p.parse_args(argv)
+    if args.episodes < 1 or args.workers < 1 or args.episode_length < 1:
+        p.error("--episodes, --workers and --episode_length must be at least 1")
+    try:
+        rows = battery(args.policy, args.episodes, args.seed, args.workers, args.terrain_seed, args.episode_length)
+    except (FileNotFoundError, ValueError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    print(table(rows))
+    if args.json:
+        Path(args.json).write_text(json.dumps(rows, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
