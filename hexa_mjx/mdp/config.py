@@ -64,7 +64,8 @@ class EnvConfig:
     curriculum_levels: int = setting(0, "a curriculum of this many levels (0: none), training only: navigate's "
                                         "goals start near and ahead and their ranges open as an environment reaches "
                                         "goals; on a terrain each level starts on harder squares (velocity: up a "
-                                        "level for an episode without a fall; hexa_mjx.mdp.curriculum)")
+                                        "level for an episode that walks its commands without a fall; "
+                                        "hexa_mjx.mdp.curriculum)")
     waypoints: tuple = setting((), "navigate: walk a path instead, \"x,y x,y ...\" in metres from the start, world "
                                    "frame, or a file holding that; the last waypoint stays the goal")
     # Velocity commands (hexa_mjx.tasks.velocity): (vx, vy, yaw rate) in the heading frame, drawn

@@ -8,9 +8,10 @@ distances from the range's start up to that fraction of the way to its end. Leve
 full task. Each goal reached moves the environment up one level; an episode that ends in a fall,
 or without reaching any goal, moves it down one. Every environment starts at level 0.
 
-The velocity task has no goals: on a terrain its level grades the ground only, up one for an
-episode that lasts its full length, down one for a fall (`VelocityTask.level_moves`). Each task
-says how its levels move (`Task.level_moves`).
+The velocity task has no goals: on a terrain its level grades the ground only, and moves by the
+commanded path walked, as legged_gym's: up one for an episode that lasts its full length and
+misses at most half of it, down one for a fall or a larger miss (`VelocityTask.level_moves`).
+Each task says how its levels move (`Task.level_moves`).
 
 Evaluation always uses the full ranges: the curriculum is a setting of the training environment
 only. Each evaluation row says how the training environments are spread over the levels

@@ -59,6 +59,8 @@ class Episode:
         self.active = [name for name, scale in scales.items() if scale != 0.0]
         self.push_every = events.push_steps(self.config.push_interval, dt)
         self.noise_scale = self.config.obs_noise * observer.noise_scale()
+        # A curriculum over commands measures each episode's walking: m asked for and m missed by.
+        self.measures_walking = bool(self.config.curriculum_levels) and task.uses_command
 
     # -- starting an episode --------------------------------------------------
 
@@ -82,7 +84,7 @@ class Episode:
                 "air_time": xp.zeros(legs),  # s since each foot last touched the floor
                 "stance_avg": xp.ones(legs),  # running share of time on the floor (all down)
                 "latency": events.draw_latency(self.config.action_latency, draws, draws.fold_in(key, 4)),
-                **self._failure_kind(draws, key)}
+                **self._failure_kind(draws, key), **self._walking(xp)}
 
     # -- one control step -----------------------------------------------------
 
@@ -90,6 +92,10 @@ class Episode:
         """The policy's observation, with the configured noise."""
         obs = self.observer.observe(qpos, qvel, ctrl, goal, heading, command)
         return events.noisy(obs, self.noise_scale, draws, key) if self.config.obs_noise else obs
+
+    def _walking(self, xp) -> dict:
+        """{"asked_m", "missed_m"} of a new episode, when the curriculum measures walking."""
+        return {"asked_m": xp.zeros(()), "missed_m": xp.zeros(())} if self.measures_walking else {}
 
     def _failure_kind(self, draws, key) -> dict:
         """{"failure_locked": 0/1} of a new episode under failure_mode "mixed"; nothing otherwise."""
@@ -143,9 +149,12 @@ class Episode:
         t = info["t"] + 1
         over = done | (t >= cfg.episode_length)
         goals = info["goals"] + completed
-        level = info["level"]
+        level, walking = info["level"], {}
+        if self.measures_walking:
+            asked, missed = self.task.walking(qpos, qvel, command, heading)
+            walking = {"asked_m": info["asked_m"] + asked * self.dt, "missed_m": info["missed_m"] + missed * self.dt}
         if cfg.curriculum_levels:
-            up, down = self.task.level_moves(completed, over, done, goals)
+            up, down = self.task.level_moves(completed, over, done, goals, walking)
             level = curriculum.next_level(level, cfg.curriculum_levels, up, down)
         # A new goal is drawn only on the step that completes one (native MuJoCo draws nothing else).
         next_goal = draws.select(completed, lambda: self.task.next_goal(qpos, goal, goals, draws, key, level),
@@ -153,7 +162,7 @@ class Episode:
         command, heading = self.task.next_command(t, command, heading, draws, draws.fold_in(key, 8))
         success = xp.maximum(info["success"], reached.astype(xp.float32))
         info = {**info, "t": t, "success": success, "goals": goals, "level": level, "air_time": air_time,
-                "stance_avg": stance_avg}
+                "stance_avg": stance_avg, **walking}
         figures = {"distance": dist, "success": success, "goals": goals, "fell": fell, "done": done, "over": over,
                    "reached": reached, "completed": completed, "non_foot": non_foot}
         return info, terms, figures, {"goal": next_goal, "heading": heading, "command": command}
@@ -174,4 +183,5 @@ class Episode:
                 "goals": xp.where(over, 0, info["goals"]),
                 "failed_legs": xp.where(over, failed, info["failed_legs"]),
                 "air_time": xp.where(over, 0.0, info["air_time"]), "stance_avg": xp.where(over, 1.0, info["stance_avg"]),
-                "latency": xp.where(over, latency, info["latency"]), **kind}
+                "latency": xp.where(over, latency, info["latency"]), **kind,
+                **{name: xp.where(over, 0.0, info[name]) for name in self._walking(xp)}}

@@ -68,10 +68,15 @@ class Task:
         and `goals` were completed earlier in the episode. Default: goals are never replaced."""
         return namespace(reached).zeros((), bool)
 
-    def level_moves(self, completed, over, fell, goals):
+    def level_moves(self, completed, over, fell, goals, walking):
         """(up, down) of the curriculum's level after a step (hexa_mjx.mdp.curriculum): up for a goal
-        completed, down for an episode that ended in a fall (`fell`) or without a goal."""
+        completed, down for an episode that ended in a fall (`fell`) or without a goal. `walking`:
+        the episode's {"asked_m", "missed_m"} so far, for tasks with `uses_command` (`walking`)."""
         return completed, over & (fell | (goals == 0))
+
+    def walking(self, qpos, qvel, command, heading):
+        """(m/s asked for, m/s missed by) this step: what a curriculum over commands sums."""
+        raise NotImplementedError(f"the {self.name} task has no commands to walk")
 
     def next_goal(self, qpos, goal, goals, draws, key, level=0):
         """The goal that follows `goals` completed ones, from the state that completed the last."""
