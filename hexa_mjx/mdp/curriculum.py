@@ -10,7 +10,7 @@ or without reaching any goal, moves it down one. Every environment starts at lev
 
 The velocity task has no goals: on a terrain its level grades the ground only, and moves by the
 commanded path walked, as legged_gym's: up one for an episode that lasts its full length and
-misses at most half of it, down one for a fall or a larger miss (`VelocityTask.level_moves`).
+walks at least half of it, down one for a fall or less than a quarter (`VelocityTask.level_moves`).
 Each task says how its levels move (`Task.level_moves`).
 
 Evaluation always uses the full ranges: the curriculum is a setting of the training environment

@@ -59,7 +59,7 @@ class Episode:
         self.active = [name for name, scale in scales.items() if scale != 0.0]
         self.push_every = events.push_steps(self.config.push_interval, dt)
         self.noise_scale = self.config.obs_noise * observer.noise_scale()
-        # A curriculum over commands measures each episode's walking: m asked for and m missed by.
+        # A curriculum over commands measures each episode's walking: m asked for and m walked.
         self.measures_walking = bool(self.config.curriculum_levels) and task.uses_command
 
     # -- starting an episode --------------------------------------------------
@@ -94,8 +94,8 @@ class Episode:
         return events.noisy(obs, self.noise_scale, draws, key) if self.config.obs_noise else obs
 
     def _walking(self, xp) -> dict:
-        """{"asked_m", "missed_m"} of a new episode, when the curriculum measures walking."""
-        return {"asked_m": xp.zeros(()), "missed_m": xp.zeros(())} if self.measures_walking else {}
+        """{"asked_m", "walked_m"} of a new episode, when the curriculum measures walking."""
+        return {"asked_m": xp.zeros(()), "walked_m": xp.zeros(())} if self.measures_walking else {}
 
     def _failure_kind(self, draws, key) -> dict:
         """{"failure_locked": 0/1} of a new episode under failure_mode "mixed"; nothing otherwise."""
@@ -151,8 +151,8 @@ class Episode:
         goals = info["goals"] + completed
         level, walking = info["level"], {}
         if self.measures_walking:
-            asked, missed = self.task.walking(qpos, qvel, command, heading)
-            walking = {"asked_m": info["asked_m"] + asked * self.dt, "missed_m": info["missed_m"] + missed * self.dt}
+            asked, walked = self.task.walking(qpos, qvel, command, heading)
+            walking = {"asked_m": info["asked_m"] + asked * self.dt, "walked_m": info["walked_m"] + walked * self.dt}
         if cfg.curriculum_levels:
             up, down = self.task.level_moves(completed, over, done, goals, walking)
             level = curriculum.next_level(level, cfg.curriculum_levels, up, down)

@@ -71,11 +71,11 @@ class Task:
     def level_moves(self, completed, over, fell, goals, walking):
         """(up, down) of the curriculum's level after a step (hexa_mjx.mdp.curriculum): up for a goal
         completed, down for an episode that ended in a fall (`fell`) or without a goal. `walking`:
-        the episode's {"asked_m", "missed_m"} so far, for tasks with `uses_command` (`walking`)."""
+        the episode's {"asked_m", "walked_m"} so far, for tasks with `uses_command` (`walking`)."""
         return completed, over & (fell | (goals == 0))
 
     def walking(self, qpos, qvel, command, heading):
-        """(m/s asked for, m/s missed by) this step: what a curriculum over commands sums."""
+        """(m/s asked for, m/s walked along it) this step: what a curriculum over commands sums."""
         raise NotImplementedError(f"the {self.name} task has no commands to walk")
 
     def next_goal(self, qpos, goal, goals, draws, key, level=0):
