@@ -127,9 +127,14 @@ class PathFollower:
         self.segment, self.reached = 0, 0
 
     @property
+    def completed(self) -> bool:
+        """Whether every waypoint has counted."""
+        return self.reached == len(self.waypoints)
+
+    @property
     def finished(self) -> bool:
-        """Whether the episode should end here: every waypoint counted, with `ends_episode`."""
-        return self.ends_episode and self.reached == len(self.waypoints)
+        """Whether the episode should end here: the path completed, with `ends_episode`."""
+        return self.ends_episode and self.completed
 
     @property
     def goal(self) -> np.ndarray:

@@ -134,7 +134,7 @@ def run_episode(policy: OnnxPolicy, env: NativeEnv, seed: int, record: bool = Fa
               "first_arrival_s": first_arrival, "first_goal_distance": start_goal_dist}
     if hasattr(source, "reached"):
         result["waypoints_reached"] = source.reached
-        result["path_completed"] = source.reached == len(source.waypoints)
+        result["path_completed"] = source.completed
         result["path_time_s"] = steps * env.dt if result["path_completed"] else None
     if commanding:
         from hexa_mjx.evaluation.tracking import episode_errors

@@ -20,12 +20,14 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
 
 from hexa_mjx.deploy import player
+from hexa_mjx.studies.path_following import PATHS
 from hexa_mjx.studies.robustness import CLEAN, run_conditions, settings
 
-SQUARE = [(2.0, 0.0), (2.0, 2.0), (0.0, 2.0), (0.0, 0.0)]  # m from the start, world frame
-PATH_LENGTH = 8.0  # m, the square's perimeter
+SQUARE = PATHS["square"]  # m from the start, world frame
+PATH_LENGTH = float(np.linalg.norm(np.diff([(0.0, 0.0), *SQUARE], axis=0), axis=1).sum())  # m: 8
 FLAT = {**CLEAN, "terrain": "flat"}  # every condition's base: the policy may have trained on a terrain
 # Group -> (least success, least speed share of intact, most falls); None: no such target.
 TARGETS = {"flat": (0.95, None, 0.02), "rough": (0.90, None, None), "push": (None, None, 0.05),
