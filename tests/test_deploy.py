@@ -45,6 +45,16 @@ def copy_state(native, data) -> None:
     mujoco.mj_forward(native.mj_model, d)
 
 
+def test_native_foot_stance_and_power():
+    env = NativeEnv(config.EnvConfig())
+    env.reset(seed=0)
+    assert env.foot_stance().tolist() == [True] * 6 and env.servo_power() < 0.1  # W: standing, settled
+    env.data.qpos[2] += 0.1  # m: the feet lifted off the floor
+    env.data.qvel[env.robot.actuator_dof] = 1.0  # rad/s
+    mujoco.mj_forward(env.mj_model, env.data)
+    assert env.foot_stance().tolist() == [False] * 6 and env.servo_power() > 0.0
+
+
 @pytest.mark.parametrize("task", SHIPPED)
 def test_onnx_matches_the_jax_policy(shipped, task):
     cfg, params, policy = shipped[task]

@@ -276,6 +276,11 @@ def test_the_generalist_battery_walks_the_square_and_stops_at_its_end():
                                        path=generalist.SQUARE)
     # 8 m at the follower's 0.5 m/s: about 16 s; an episode run to its 30 s end would say 30 s
     assert flat["path_completed_rate"] == 1.0 and 12 < flat["path_time_s_median"] < 25
+    # its gait, from the native engine's foot contacts: six legs, the torso's speed the path's
+    gait = flat["gait"]
+    assert len(gait["duty_factor"]) == 6 and all(0 <= d <= 1 for d in gait["duty_factor"])
+    assert 0.5 * 8 / flat["path_time_s_median"] < gait["speed"] < 2 * 8 / flat["path_time_s_median"]
+    assert "| flat |" in generalist.gait_table([{**flat, "condition": "flat"}])
     row = {"group": "one leg", "path_completed_rate": 0.95, "speed_share_of_intact": 0.69, "fall_rate": 0.0}
     assert not generalist.meets(row) and generalist.meets({**row, "speed_share_of_intact": 0.7})
     assert not generalist.meets({**row, "group": "flat", "speed_share_of_intact": None, "fall_rate": 0.03})

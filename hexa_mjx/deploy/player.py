@@ -106,6 +106,7 @@ def run_episode(policy: OnnxPolicy, env: NativeEnv, seed: int, record: bool = Fa
     commanding = env.task.uses_command
     track = {"command": [], "commanded": [], "velocity": []}
     total, feet_only, steps, first_arrival = 0.0, 0, 0, None
+    stance, power, xy = [], [], []  # per step, for the gait (hexa_mjx.evaluation.gait)
     while True:
         if source is not None:
             env.set_command([*source(steps * env.dt, env), 0.0])
@@ -119,6 +120,9 @@ def run_episode(policy: OnnxPolicy, env: NativeEnv, seed: int, record: bool = Fa
         total += reward
         steps += 1
         feet_only += info["feet_only"]
+        stance.append(env.foot_stance())
+        power.append(env.servo_power())
+        xy.append(env.data.qpos[:2].copy())
         if commanding:
             track["velocity"].append(env.task.measured(env.data.qpos, env.data.qvel))
         if info["success"] and first_arrival is None:
@@ -131,7 +135,8 @@ def run_episode(policy: OnnxPolicy, env: NativeEnv, seed: int, record: bool = Fa
     result = {"seed": seed, "success": bool(info["success"]), "final_distance": info["distance"],
               "fell": info["fell"], "nonfinite": info["nonfinite"], "goals_reached": info["goals_reached"],
               "steps": steps, "return": total, "feet_only_share": feet_only / steps,
-              "first_arrival_s": first_arrival, "first_goal_distance": start_goal_dist}
+              "first_arrival_s": first_arrival, "first_goal_distance": start_goal_dist,
+              "gait": episode_gait(env, np.array(stance), np.array(power), np.array(xy))}
     if hasattr(source, "reached"):
         result["waypoints_reached"] = source.reached
         result["path_completed"] = source.completed
@@ -145,6 +150,15 @@ def run_episode(policy: OnnxPolicy, env: NativeEnv, seed: int, record: bool = Fa
         result["trajectory"] = {"qpos": np.array(qpos), "goal": np.array(goals),
                                 **({k: np.array(v) for k, v in track.items()} if commanding else {})}
     return result
+
+
+def episode_gait(env: NativeEnv, stance: np.ndarray, power: np.ndarray, xy: np.ndarray) -> dict:
+    """The gait of a whole episode past its first SETTLE_STEPS (gait.analyze), as JSON values."""
+    from hexa_mjx.evaluation import gait
+
+    sl = slice(min(gait.SETTLE_STEPS, len(stance)), None)
+    record = gait.analyze(stance[sl], power[sl], xy[sl], env.dt, env.robot.mass, env.robot.leg_length)
+    return {k: v.tolist() if isinstance(v, np.ndarray) else v for k, v in record.items()}
 
 
 def tracking(env: NativeEnv, episodes: list[dict]) -> dict:
@@ -167,7 +181,9 @@ def tracking(env: NativeEnv, episodes: list[dict]) -> dict:
 
 
 def summarize(episodes: list[dict]) -> dict:
-    """Rates and means over episodes."""
+    """Rates and means over episodes, and their gait (hexa_mjx.evaluation.gait.summarize)."""
+    from hexa_mjx.evaluation import gait
+
     def mean(key):
         return float(np.mean([e[key] for e in episodes]))
 
@@ -185,13 +201,24 @@ def summarize(episodes: list[dict]) -> dict:
             "nonfinite_rate": mean("nonfinite"), "final_distance_mean": mean("final_distance"),
             "goals_per_episode": mean("goals_reached"), "feet_only_share": mean("feet_only_share"),
             "first_arrival_s_mean": float(np.mean(arrivals)) if arrivals else None,
-            "speed_to_first_goal": float(np.mean(speeds)) if speeds else None}
+            "speed_to_first_goal": float(np.mean(speeds)) if speeds else None,
+            **({"gait": without_nan(gait.summarize([e["gait"] for e in episodes]))}
+               if all("gait" in e for e in episodes) else {})}
+
+
+def without_nan(value):
+    """`value` (nested dicts and lists) with NaN as None: JSON has no NaN, and None equals None."""
+    if isinstance(value, dict):
+        return {k: without_nan(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [without_nan(v) for v in value]
+    return None if isinstance(value, float) and np.isnan(value) else value
 
 
 def write_json(path: Path, policy: OnnxPolicy, env: NativeEnv, episodes: list[dict], tracking: dict | None = None) -> None:
     """Per-episode results and their summary (with the velocity task's `tracking` figures, eval.py's
     per-class table included), written atomically."""
-    rows = [{k: v for k, v in e.items() if k != "trajectory"} for e in episodes]
+    rows = [{k: v for k, v in e.items() if k not in ("trajectory", "gait")} for e in episodes]
     doc = {"policy": str(policy.path), "task": env.config.task, "engine": "mujoco (native C)",
            "model": env.config.model_path, "model_matches_training": model_matches(policy, env),
            "summary": summarize(episodes), **({"tracking": tracking} if tracking else {}), "episodes": rows}

@@ -21,7 +21,7 @@ from hexa_mjx.mdp import events, randomization
 from hexa_mjx.mdp.config import EnvConfig
 from hexa_mjx.mdp.episode import Contacts, make_episode
 from hexa_mjx.robot.kinematics import yaw
-from hexa_mjx.robot.model import action_to_ctrl
+from hexa_mjx.robot.model import action_to_ctrl, servo_power
 
 
 class NumpyDraws:
@@ -155,6 +155,15 @@ class NativeEnv:
         """(leg contacts while that foot is lifted, non-foot contacts) with the floor, now."""
         c = self.contacts()
         return self.robot.contact_counts(c.geom1, c.geom2, c.dist, c.foot_pos, self.config.lift_clearance)
+
+    def foot_stance(self) -> np.ndarray:
+        """Whether each foot touches the floor now, (legs,) bool."""
+        c = self.data.contact
+        return np.asarray(self.robot.foot_stance(c.geom1, c.geom2, c.dist))
+
+    def servo_power(self) -> float:
+        """The servos' mechanical power now, sum over joints of |torque x joint velocity|, W."""
+        return float(servo_power(self.data.actuator_force, self.data.qvel, self.robot.actuator_dof))
 
     def contacts(self) -> Contacts:
         c = self.data.contact

@@ -96,6 +96,20 @@ def table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def gait_table(rows: list[dict]) -> str:
+    """Markdown: each condition's gait over its episodes (player.summarize's, the whole episode
+    less its first half second): the commonest class, each leg's duty factor, cost of transport."""
+    lines = ["| condition | gait (share of episodes) | duty factor, legs 1-6 | cost of transport (median) |",
+             "|---|---|---|---|"]
+    for r in rows:
+        g = r.get("gait") or {}
+        shares = ", ".join(f"{c} {v:.0%}" for c, v in g.get("class_shares", {}).items() if v)
+        duty = " ".join(f"{d:.2f}" for d in g.get("duty_factor", [])) or "-"
+        cot = g.get("cost_of_transport_median")
+        lines.append(f"| {r['condition']} | {shares or '-'} | {duty} | {'-' if cot is None else f'{cot:.2f}'} |")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m hexa_mjx.studies.generalist", description=__doc__.split("\n\n")[0])
     p.add_argument("policy", help="exported velocity-task policy (.onnx)")
@@ -114,6 +128,8 @@ def main(argv=None) -> int:
         print(f"error: {e}", file=sys.stderr)
         return 2
     print(table(rows))
+    print()
+    print(gait_table(rows))
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1))
     return 0
