@@ -73,3 +73,46 @@ def test_annealed_learning_rate_reaches_zero_at_the_end(settings, ours):
     moved = jax.tree.leaves(ppo.train(env, ppo_settings, **kwargs, anneal_lr=(0, 256))[1])
     for other in (policy0, ours[0][1]):
         assert not all(np.array_equal(a, b) for a, b in zip(moved, jax.tree.leaves(other)))
+
+
+class Seen(Exception):
+    """Raised by on_interval once it has seen the environments training starts from."""
+
+
+def start_environments(settings, **extra):
+    env, ppo_settings, kwargs = settings
+    seen = []
+
+    def on_interval(step, make_policy, params, adam, env_state, at):
+        seen.append(jax.tree.map(np.asarray, env_state))
+        raise Seen  # before the update compiles: only the environments' reset runs
+
+    with pytest.raises(Seen):
+        ppo.train(env, ppo_settings, **kwargs, on_interval=on_interval, **extra)
+    return seen[0]
+
+
+def test_saved_environments_carry_on_under_a_new_schedule(settings, capsys):
+    """A resume that is not exact (a longer run) continues the environments it saved: their
+    episodes, and a curriculum's levels, go on instead of starting over."""
+    fresh = start_environments(settings)
+    moved = [np.asarray(leaf) + 1 if np.issubdtype(np.asarray(leaf).dtype, np.floating) else np.asarray(leaf)
+             for leaf in jax.tree.leaves(fresh)]
+    carried = start_environments(settings, environments=moved)
+    jax.tree.map(np.testing.assert_array_equal, jax.tree.leaves(carried), moved)
+    # Saved from another count of environments: they start afresh, and the run says so.
+    afresh = start_environments(settings, environments=[leaf[:, :1] for leaf in moved])
+    jax.tree.map(np.testing.assert_array_equal, afresh, fresh)
+    assert "the saved environments do not fit this run's: they start afresh" in capsys.readouterr().out
+
+
+def test_saved_environments_are_read_for_the_same_count_of_environments():
+    from hexa_mjx.training import resume
+
+    arrays = {"local_key": np.zeros(2), "env_0001": np.ones(3), "env_0000": np.zeros(3)}
+    facts = {"schedule": resume.schedule(CFG), "processes": 1}
+    leaves = resume.saved_environments((arrays, facts), dataclasses.replace(CFG, num_timesteps=10 ** 7))
+    assert [leaf.tolist() for leaf in leaves] == [[0.0] * 3, [1.0] * 3]  # in the state's leaf order
+    assert resume.saved_environments((arrays, facts), dataclasses.replace(CFG, num_envs=16)) is None
+    assert resume.saved_environments((arrays, {**facts, "processes": 2}), CFG) is None
+    assert resume.saved_environments(None, CFG) is None

@@ -180,12 +180,16 @@ def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
         restore = distributed.share(restore if main else template)
     if adam:
         optimizer = distributed.share(optimizer if main else optimizer_template)
-    position = None
+    position, environments = None, None
     if start_step > 0:  # resumed from the run's own checkpoint (none is written at step 0)
-        position, why = exact.exact_resume(exact.shared(saved), cfg, jax.process_count(), jax.process_index())
+        saved = exact.shared(saved)
+        position, why = exact.exact_resume(saved, cfg, jax.process_count(), jax.process_index())
+        if not position:  # a new schedule, but the same environments: episodes and curriculum levels go on
+            environments = exact.saved_environments(saved, cfg, jax.process_count(), jax.process_index())
         if main:
             print(f"resuming {run_dir} from step {start_step:,}"
                   + (": exactly, as if it had not stopped" if position else f", not exactly: {why}")
+                  + ("; its environments carry on" if environments else "")
                   + ("" if adam else " (its checkpoint has no optimizer state: Adam starts afresh)"))
     remaining = cfg.num_timesteps - start_step
     if remaining <= 0:
@@ -273,7 +277,7 @@ def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
               wrap_env_fn=wrap_env_fn(env, cfg.randomize, track_returns=True, failure_schedule=schedule),
               randomization_fn=randomization_fn, restore_params=restore, restore_adam=optimizer,
               anneal_lr=(offset, cfg.num_timesteps) if cfg.anneal_lr else None,
-              on_interval=on_interval, on_update=on_update, resume=position,
+              on_interval=on_interval, on_update=on_update, resume=position, environments=environments,
               stop=asked_to_stop if stop is not None else None, on_stop=on_stop)
     total = time.time() - t0
     if logger is None:

@@ -107,7 +107,7 @@ class Position:
 def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=None, randomization_fn=None,
           restore_params=None, restore_adam=None, anneal_lr: tuple[int, int] | None = None,
           on_interval: Callable | None = None, on_update: Callable | None = None, resume: dict | None = None,
-          stop: Callable | None = None, on_stop: Callable | None = None):
+          environments: list | None = None, stop: Callable | None = None, on_stop: Callable | None = None):
     """PPO as brax's `ppo.train` runs it (the same `settings` and `network_factory`), for
     `settings.num_timesteps` env steps in `settings.num_evals - 1` intervals. On every process,
     `on_interval(step, make_policy, params, adam_state, env_state)` is called before training and
@@ -119,7 +119,9 @@ def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=No
     `settings.learning_rate` at env step 0 to 0 at `total`, for a run that has `done` steps behind it.
     `on_interval`'s sixth argument is the run's `Position`. `resume` (a `Position`'s step,
     interval, update, keys and the environment state's leaves, as host arrays) continues the same
-    run exactly where that position was; steps are then counted from the run's start. `stop()` is
+    run exactly where that position was; steps are then counted from the run's start. Without it,
+    `environments` (the environment state's saved leaves) continues the training environments as
+    they were under a new schedule, where they fit this run's (else they start afresh). `stop()` is
     asked after every update; when it says so, `on_stop(step, params, adam_state, position)` is
     called and training returns early. Returns the final (normalizer, policy, value) params."""
     if not settings.normalize_observations:
@@ -148,12 +150,18 @@ def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=No
                                              randomization_fn=randomize)
     key_envs = jax.random.split(key_env, settings.num_envs // process_count)
     env_state = jax.pmap(env.reset, axis_name=AXIS)(key_envs.reshape((len(devices), -1) + key_envs.shape[1:]))
-    if resume is not None:  # the environments as they were: same structure, saved leaves
-        leaves, expected = resume["env_state"], jax.tree.leaves(env_state)
-        if len(leaves) != len(expected) or any(np.shape(a) != b.shape for a, b in zip(leaves, expected)):
+    leaves = resume["env_state"] if resume is not None else environments
+    if leaves is not None:  # the environments as they were: same structure, saved leaves
+        expected = jax.tree.leaves(env_state)
+        fits = len(leaves) == len(expected) and all(np.shape(a) == b.shape for a, b in zip(leaves, expected))
+        if not fits and resume is not None:
             raise ValueError("the saved environment state does not fit this run's environments")
-        env_state = jax.tree.unflatten(jax.tree.structure(env_state),
-                                       [jp.asarray(a, dtype=b.dtype) for a, b in zip(leaves, expected)])
+        if fits:
+            env_state = jax.tree.unflatten(jax.tree.structure(env_state),
+                                           [jp.asarray(a, dtype=b.dtype) for a, b in zip(leaves, expected)])
+        else:
+            print("the saved environments do not fit this run's: they start afresh")
+    if resume is not None:
         local_key = jp.asarray(resume["local_key"])
 
     obs_shape = env_state.obs.shape[2:]

@@ -127,3 +127,16 @@ def exact_resume(saved, cfg, processes: int = 1, process: int = 0) -> tuple[dict
     return {"step": facts["step"], "interval": facts["interval"], "update": facts["update"],
             "local_key": mine(arrays["local_key"]), "key": mine(arrays["key"]) if "key" in arrays else None,
             "env_state": env, "evaluations": facts["evaluations"]}, ""
+
+
+def saved_environments(saved, cfg, processes: int = 1, process: int = 0) -> list | None:
+    """The training environments' leaves from a checkpoint's saved (arrays, facts), for a resume
+    that is not exact (a longer run, more evaluations, another seed): its episodes and curriculum
+    levels carry on. None where it has none, or another count of environments or processes."""
+    if saved is None:
+        return None
+    arrays, facts = saved
+    if facts.get("processes", 1) != processes or facts["schedule"].get("num_envs") != cfg.num_envs:
+        return None
+    mine = (lambda a: a[process]) if processes > 1 else (lambda a: a)  # noqa: E731
+    return [mine(arrays[k]) for k in sorted(k for k in arrays if k.startswith("env_"))]
