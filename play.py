@@ -54,6 +54,10 @@ def parse_args(argv=None) -> argparse.Namespace:
                        "the path into velocity commands (pure pursuit)")
     drive.add_argument("--follow_speed", type=float, default=0.5, help="m/s, the path follower's cruising speed "
                        "(default: 0.5)")
+    what.add_argument("--terrain_contacts", default="all", choices=["all", "mjx"],
+                      help="'all': every heightfield contact MuJoCo C makes; 'mjx': made as MJX makes them, side-wall "
+                           "normals turned up and only those within 1 mm of the deepest kept (hexa_mjx.engines."
+                           "terrain_contacts)")
     what.add_argument("--solver", default="trained", choices=["trained", "default"],
                    help="'trained': the model's fast solver setting (1 iteration); 'default': MuJoCo's default "
                         "accuracy (100 iterations, 50 line-search), the sim-to-sim check")
@@ -127,7 +131,8 @@ def main(argv=None) -> int:
         schedule = commands.Schedule(commands.load_schedule(args.commands)) if args.commands else None
         if args.waypoints and velocity:
             overrides.pop("waypoints")  # the follower walks them, not the task
-        env = player.env_for(policy, args.model, randomize=args.randomize, **overrides)
+        env = player.env_for(policy, args.model, randomize=args.randomize, terrain_contacts=args.terrain_contacts,
+                             **overrides)
         if args.json:
             out = Path(args.json)
             if out.is_dir():

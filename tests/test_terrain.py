@@ -184,3 +184,66 @@ def test_native_heightfield_gives_a_sphere_near_a_cell_edge_a_side_contact():
     seam = tilts(-0.008, -0.05)  # the cells' edge is at x = 0
     assert len(seam) == 2 and min(seam) == 0.0 and max(seam) > 45
     assert main(["no-such-policy.onnx"]) == 2 and main(["policies/navigate.onnx", "--terrain", "lava"]) == 2
+
+
+def test_terrain_contacts_as_mjx_makes_them():
+    """hexa_mjx.engines.terrain_contacts: MuJoCo C's step with MJX's rules for heightfield contacts.
+    The step is mj_step's own pipeline: with nothing changed it matches mj_step bit for bit; a
+    side wall's horizontal normal is turned up to the face's, and shallow side contacts go."""
+    from hexa_mjx.engines import terrain_contacts
+    from hexa_mjx.engines.native import NativeEnv
+    from hexa_mjx.robot.model import action_to_ctrl
+    from hexa_mjx.studies.benchmark import gait_actions
+
+    robot = RobotModel(make_config(terrain="bumps", terrain_seed=3))
+    model = robot.mj_model
+    plain, ours = mujoco.MjData(model), mujoco.MjData(model)
+    plain.qpos[:] = robot.qpos0
+    mujoco.mj_forward(model, plain)
+    same = changed = 0
+    for action in gait_actions(20, 1 / 60):
+        plain.ctrl[:] = action_to_ctrl(np.asarray(action), robot.ctrl_lo, robot.ctrl_hi)
+        for _ in range(robot.n_substeps):  # from each state one step of each; on with mj_step's
+            mujoco.mj_copyData(ours, model, plain)
+            count = terrain_contacts.step(model, ours, robot.floor)
+            mujoco.mj_step(model, plain)
+            if count == 0:
+                assert np.array_equal(plain.qpos, ours.qpos) and np.array_equal(plain.qvel, ours.qvel)
+            same, changed = same + (count == 0), changed + (count > 0)
+    assert same > 10 and changed > 10  # both kinds of step occur on bumps
+    assert np.abs(plain.qpos[:2] - robot.qpos0[:2]).max() > 0.005  # the gait moved the robot over the field
+
+    # Two cells along x: flat, then rising 5 cm over 10 cm (normal (-0.447, 0, 0.894)).
+    radius = 0.012  # m, the robot's foot sphere
+    m = mujoco.MjModel.from_xml_string(f"""<mujoco><asset><hfield name="h" nrow="2" ncol="3" size="0.1 0.05 0.05 0.1"
+        elevation="0 0 1 0 0 1"/></asset><worldbody><geom type="hfield" hfield="h"/>
+        <body><freejoint/><geom type="sphere" size="{radius}"/></body></worldbody></mujoco>""")
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    np.testing.assert_allclose(terrain_contacts.face_normal(m, d, 0, np.array([0.05, 0.0, 0.0])),
+                               np.array([-0.5, 0.0, 1.0]) / np.sqrt(1.25))
+    np.testing.assert_allclose(terrain_contacts.face_normal(m, d, 0, np.array([-0.05, 0.0, 0.0])), [0.0, 0.0, 1.0])
+    # Sunk 12 mm, 11 mm short of the rising cell: MuJoCo C pushes it back through that cell's side wall.
+    d.qpos[:] = [-0.011, 0.0, 0.0, 1, 0, 0, 0]
+    mujoco.mj_forward(m, d)
+    assert d.ncon == 2 and d.contact.frame[1, :3].round(6).tolist() == [-1.0, 0.0, 0.0]
+    assert terrain_contacts.step(m, d, 0) == 2  # turned up, then dropped: 11 mm shallower than the deepest
+    kept = d.contact.exclude[:d.ncon] == 0
+    assert kept.tolist() == [True, False] and (d.contact.frame[:d.ncon, 2] > 0.5).all()
+
+    # A foot sphere 5 mm deep on flat cells: 8 mm from an edge its side contact (1.4 mm deep) goes,
+    # 3 mm from it (4.4 mm deep, within 1 mm of the 5 mm top contact) it stays, as in MJX.
+    depth = 0.005
+    m = mujoco.MjModel.from_xml_string(f"""<mujoco><asset><hfield name="h" nrow="3" ncol="3" size="0.1 0.1 0.05 0.1"/>
+        </asset><worldbody><geom type="hfield" hfield="h"/>
+        <body><freejoint/><geom type="sphere" size="{radius}"/></body></worldbody></mujoco>""")
+    d = mujoco.MjData(m)
+    for x, dropped in ((-0.008, [False, True]), (-0.003, [False, False])):
+        d.qpos[:] = [x, -0.05, radius - depth, 1, 0, 0, 0]
+        mujoco.mj_forward(m, d)
+        c, n = d.contact, d.ncon
+        assert terrain_contacts.shallow(c.geom1[:n], c.geom2[:n], c.dist[:n], 0, m.ngeom).tolist() == dropped
+    flat = RobotModel(make_config())  # a plane floor: mj_step itself
+    assert terrain_contacts.step(flat.mj_model, mujoco.MjData(flat.mj_model), flat.floor) == 0
+    with pytest.raises(ValueError, match="terrain_contacts is one of"):
+        NativeEnv(make_config(), terrain_contacts="some")

@@ -58,10 +58,11 @@ class OnnxPolicy:
 
 
 def env_for(policy: OnnxPolicy, model_path: str | Path | None = None, randomize: bool = False,
-            **overrides) -> NativeEnv:
+            terrain_contacts: str = "all", **overrides) -> NativeEnv:
     """The native environment a policy was trained on, with `EnvConfig` overrides (goal range,
-    waypoints, episode length...) and, with `randomize`, randomized physics every episode; checks
-    that the model's joints and observation match the policy."""
+    waypoints, episode length...) and, with `randomize`, randomized physics every episode;
+    `terrain_contacts` as NativeEnv takes it. Checks that the model's joints and observation match
+    the policy."""
     meta = policy.metadata
     task = meta["env_config"].get("task")
     if task not in TASKS:
@@ -78,7 +79,7 @@ def env_for(policy: OnnxPolicy, model_path: str | Path | None = None, randomize:
         settings["model_path"] = str(model_path)
     known = {f.name for f in dataclasses.fields(EnvConfig)}  # a newer export's extra settings are ignored
     env = NativeEnv(make_config(**{k: v for k, v in settings.items() if k in known}),
-                    ranges=randomization.Ranges() if randomize else None)
+                    ranges=randomization.Ranges() if randomize else None, terrain_contacts=terrain_contacts)
     joints = env.robot.actuator_joints
     if joints != meta["joint_order"]:
         raise ValueError(f"the model {env.config.model_path} drives joints {joints}, but the policy "

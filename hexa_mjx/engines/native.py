@@ -17,6 +17,7 @@ import copy
 import mujoco
 import numpy as np
 
+from hexa_mjx.engines import terrain_contacts as terrain_contacts_
 from hexa_mjx.mdp import events, randomization
 from hexa_mjx.mdp.config import EnvConfig
 from hexa_mjx.mdp.episode import Contacts, make_episode
@@ -58,8 +59,14 @@ class NumpyDraws:
 class NativeEnv:
     """One environment of a task on MuJoCo C; `observe_as` names another task's observation."""
 
-    def __init__(self, config: EnvConfig = EnvConfig(), observe_as: str = "", ranges=None):
-        """`ranges` (hexa_mjx.mdp.randomization.Ranges): draw a randomized physics model every episode."""
+    def __init__(self, config: EnvConfig = EnvConfig(), observe_as: str = "", ranges=None,
+                 terrain_contacts: str = "all"):
+        """`ranges` (hexa_mjx.mdp.randomization.Ranges): draw a randomized physics model every episode.
+        `terrain_contacts`: "all" of MuJoCo C's heightfield contacts, or "mjx", made as MJX makes them
+        (hexa_mjx.engines.terrain_contacts)."""
+        if terrain_contacts not in terrain_contacts_.MODES:
+            raise ValueError(f"terrain_contacts is one of {terrain_contacts_.MODES}, got {terrain_contacts!r}")
+        self.terrain_contacts = terrain_contacts
         self.episode = make_episode(config, observe_as)
         self.config, self.robot, self.task = self.episode.config, self.episode.robot, self.episode.task
         self.observe_as = self.episode.observer.name
@@ -184,7 +191,10 @@ class NativeEnv:
         failed, delay = episode.failed_servos(self.info), episode.delay(self.info)
         for i in range(self.n_substeps):
             data.ctrl[:] = episode.servo_ctrl(i, delay, target, previous, data.qpos, failed)
-            mujoco.mj_step(model, data)
+            if self.terrain_contacts == "mjx":
+                terrain_contacts_.step(model, data, self.robot.floor)
+            else:
+                mujoco.mj_step(model, data)
         data.ctrl[:] = target  # the policy's own command, whatever failed or lagged
         finite = events.finite(data.qpos, data.qvel)
         if not finite:  # keep the last finite state and end the episode

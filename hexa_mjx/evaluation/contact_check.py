@@ -3,7 +3,8 @@
     python -m hexa_mjx.evaluation.contact_check policies/navigate.onnx --terrain bumps --terrain_difficulty 0
 
 A policy walks in native MuJoCo (`hexa_mjx.deploy.player`); every few control steps its state is kept, and
-both engines' colliders run on the kept states. On a zero-height heightfield the ground is flat,
+both engines' colliders run on the kept states: the share of tilted normals, which feet touch, how
+many contacts each touching foot gets and how deep. On a zero-height heightfield the ground is flat,
 so every contact normal should point straight up: the share of tilted normals is what each
 collider adds. (docs/RESULTS.md, "Rough terrain": native MuJoCo's prisms give a foot sphere near a
 cell's edge a contact through the neighbouring prism's side wall.)
@@ -32,18 +33,20 @@ def walk_states(policy, env, episodes: int, every: int) -> np.ndarray:
                            for seed in range(episodes)])
 
 
-def native_tilts(model: mujoco.MjModel, states: np.ndarray) -> np.ndarray:
-    """Normal tilts of the penetrating contacts MuJoCo C finds at each state."""
-    data, tilts = mujoco.MjData(model), []
+def native_contacts(model: mujoco.MjModel, states: np.ndarray) -> list[np.ndarray]:
+    """Per state, the penetrating contacts MuJoCo C finds: rows of (geom1, geom2, dist m, normal z)."""
+    data, out = mujoco.MjData(model), []
     for qpos in states:
         data.qpos[:] = qpos
         mujoco.mj_forward(model, data)
-        tilts += [tilt_degrees(c.frame[2]) for c in data.contact[:data.ncon] if c.dist < 0]
-    return np.array(tilts)
+        c, n = data.contact, data.ncon
+        rows = np.stack([c.geom1[:n], c.geom2[:n], c.dist[:n], c.frame[:n, 2]], axis=1).reshape(-1, 4)
+        out.append(rows[rows[:, 2] < 0])
+    return out
 
 
-def mjx_tilts(model: mujoco.MjModel, states: np.ndarray) -> np.ndarray:
-    """Normal tilts of the penetrating contacts MJX (JAX implementation) finds at each state."""
+def mjx_contacts(model: mujoco.MjModel, states: np.ndarray) -> list[np.ndarray]:
+    """Per state, the penetrating contacts MJX (JAX implementation) finds, as `native_contacts`."""
     import jax
     import jax.numpy as jp
     from mujoco import mjx
@@ -54,15 +57,39 @@ def mjx_tilts(model: mujoco.MjModel, states: np.ndarray) -> np.ndarray:
 
     def penetrations(qpos):
         data = mjx.forward(mx, mjx.make_data(mx).replace(qpos=qpos))
-        return contacts.of(data)[2], contacts.normals(data)[:, 2]
+        geom1, geom2, dist = contacts.of(data)
+        return geom1, geom2, dist, contacts.normals(data)[:, 2]
 
-    dist, z = (np.asarray(x) for x in jax.jit(jax.vmap(penetrations))(jp.asarray(states, jp.float32)))
-    return tilt_degrees(z[dist < 0])
+    g1, g2, dist, z = (np.asarray(x, np.float64) for x in
+                       jax.jit(jax.vmap(penetrations))(jp.asarray(states, jp.float32)))
+    rows = np.stack([g1, g2, dist, z], axis=-1)
+    return [r[r[:, 2] < 0] for r in rows]
 
 
-def summary(tilts: np.ndarray, states: int) -> str:
-    return (f"{len(tilts)} penetrating contacts ({len(tilts) / states:.1f} per state); normals tilted over 10 deg "
-            f"{np.mean(tilts > 10):.0%}, over 45 deg {np.mean(tilts > 45):.0%}")
+def native_tilts(model: mujoco.MjModel, states: np.ndarray) -> np.ndarray:
+    """Normal tilts of the penetrating contacts MuJoCo C finds at each state."""
+    return tilt_degrees(np.concatenate([r[:, 3] for r in native_contacts(model, states)]))
+
+
+def foot_contacts(per_state: list[np.ndarray], feet: np.ndarray, floor: int) -> tuple[np.ndarray, np.ndarray]:
+    """(contacts per foot with the floor, deepest dist per foot, m; 0 where none), each (states, feet)."""
+    count, depth = np.zeros((len(per_state), len(feet))), np.zeros((len(per_state), len(feet)))
+    for i, rows in enumerate(per_state):
+        other = np.where(rows[:, 0] == floor, rows[:, 1], rows[:, 0])
+        for k, foot in enumerate(feet):
+            mine = rows[other == foot, 2]
+            count[i, k], depth[i, k] = len(mine), mine.min() if len(mine) else 0.0
+    return count, depth
+
+
+def summary(per_state: list[np.ndarray], feet: np.ndarray, floor: int) -> str:
+    tilts = tilt_degrees(np.concatenate([r[:, 3] for r in per_state]))
+    count, depth = foot_contacts(per_state, feet, floor)
+    touching = count > 0
+    return (f"{len(tilts)} penetrating contacts ({len(tilts) / len(per_state):.1f} per state); normals tilted over "
+            f"10 deg {np.mean(tilts > 10):.0%}, over 45 deg {np.mean(tilts > 45):.0%}; feet touching per state "
+            f"{touching.sum(1).mean():.2f}, contacts per touching foot {count[touching].mean():.2f} (most "
+            f"{int(count.max())}), its deepest {1000 * depth[touching].mean():.2f} mm")
 
 
 def main(argv=None) -> int:
@@ -86,8 +113,12 @@ def main(argv=None) -> int:
         return 2
     states = walk_states(policy, env, args.episodes, args.every)
     print(f"{len(states)} states of {args.policy} walking on {args.terrain} at difficulty {args.terrain_difficulty:g}")
-    print("native MuJoCo:", summary(native_tilts(env.mj_model, states), len(states)))
-    print("MJX:          ", summary(mjx_tilts(env.mj_model, states), len(states)))
+    native, jax_ = native_contacts(env.mj_model, states), mjx_contacts(env.mj_model, states)
+    feet, floor = env.robot.feet, env.robot.floor
+    print("native MuJoCo:", summary(native, feet, floor))
+    print("MJX:          ", summary(jax_, feet, floor))
+    differ = (foot_contacts(native, feet, floor)[0] > 0) != (foot_contacts(jax_, feet, floor)[0] > 0)
+    print(f"states where the engines differ on which feet touch: {differ.any(1).mean():.1%}")
     return 0
 
 

@@ -56,13 +56,15 @@ def conditions(policy: player.OnnxPolicy, terrain_seed: int) -> list[tuple[str, 
 
 
 def battery(policy_path: str, episodes: int, seed: int = 0, workers: int = 1, terrain_seed: int = 1,
-            episode_length: int = 1800) -> list[dict]:
-    """One row per condition: its group, name, path figures (player.summarize) and speed share."""
+            episode_length: int = 1800, terrain_contacts: str = "all") -> list[dict]:
+    """One row per condition: its group, name, path figures (player.summarize) and speed share.
+    `terrain_contacts`: the native engine's heightfield contacts (hexa_mjx.engines.terrain_contacts)."""
     policy = player.OnnxPolicy(policy_path)
     if policy.metadata["env_config"].get("task") != "velocity":
         raise ValueError(f"{policy_path} is not a velocity-task policy: the battery drives it with the path follower")
     rows = conditions(policy, terrain_seed)
-    summaries = run_conditions(policy_path, [({**FLAT, "episode_length": episode_length, **o}, r)
+    base = {**FLAT, "episode_length": episode_length, "terrain_contacts": terrain_contacts}
+    summaries = run_conditions(policy_path, [({**base, **o}, r)
                                              for _, _, o, r in rows], episodes, seed, workers, path=SQUARE)
     out = [{"group": group, "condition": name, **summary} for (group, name, _, _), summary in zip(rows, summaries)]
     intact = out[0]["path_time_s_median"]
@@ -118,12 +120,16 @@ def main(argv=None) -> int:
     p.add_argument("--terrain_seed", type=int, default=1, help="the rough conditions' terrain")
     p.add_argument("--episode_length", type=int, default=1800, help="control steps to finish the path in (30 s)")
     p.add_argument("--workers", type=int, default=1, help="processes that share the episodes")
+    p.add_argument("--terrain_contacts", default="all", choices=["all", "mjx"],
+                   help="the rough conditions' heightfield contacts: MuJoCo C's own, or made as MJX makes them "
+                        "(hexa_mjx.engines.terrain_contacts)")
     p.add_argument("--json", default="", help="write the rows here")
     args = p.parse_args(argv)
     if args.episodes < 1 or args.workers < 1 or args.episode_length < 1:
         p.error("--episodes, --workers and --episode_length must be at least 1")
     try:
-        rows = battery(args.policy, args.episodes, args.seed, args.workers, args.terrain_seed, args.episode_length)
+        rows = battery(args.policy, args.episodes, args.seed, args.workers, args.terrain_seed, args.episode_length,
+                       args.terrain_contacts)
     except (FileNotFoundError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
