@@ -266,14 +266,16 @@ def test_standing_still_scores_one_on_zero_commands_and_less_on_wider_ranges():
 def test_the_generalist_battery_walks_the_square_and_stops_at_its_end():
     from hexa_mjx.deploy import player
     from hexa_mjx.robot.constants import REPO_ROOT
-    from hexa_mjx.studies import generalist, robustness
+    from hexa_mjx.studies import generalist
 
     shipped = str(REPO_ROOT / "policies" / "velocity.onnx")
     groups = [group for group, *_ in generalist.conditions(player.OnnxPolicy(shipped), terrain_seed=1)]
     # flat; bumps, 15-degree slopes, stairs; pushes; 8 physics corners; 6 legs x limp, locked; 9 pairs
     assert [groups.count(g) for g in generalist.TARGETS] == [1, 3, 1, 8, 12, 9]
-    [flat] = robustness.run_conditions(shipped, [({**generalist.FLAT, "episode_length": 1800}, None)], 1,
-                                       path=generalist.SQUARE)
+    rows = generalist.battery(shipped, 1, groups=["push"])  # and the flat row, whose speed the others share
+    assert [r["condition"] for r in rows] == ["flat, intact", "pushes up to 0.5 m/s"]
+    flat = rows[0]
+    assert flat["speed_share_of_intact"] == 1.0 and flat["speed"] == pytest.approx(8 / flat["path_time_s_median"])
     # 8 m at the follower's 0.5 m/s: about 16 s; an episode run to its 30 s end would say 30 s
     assert flat["path_completed_rate"] == 1.0 and 12 < flat["path_time_s_median"] < 25
     # its gait, from the native engine's foot contacts: six legs, the torso's speed the path's

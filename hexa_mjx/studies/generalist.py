@@ -56,13 +56,14 @@ def conditions(policy: player.OnnxPolicy, terrain_seed: int) -> list[tuple[str, 
 
 
 def battery(policy_path: str, episodes: int, seed: int = 0, workers: int = 1, terrain_seed: int = 1,
-            episode_length: int = 1800, terrain_contacts: str = "all") -> list[dict]:
+            episode_length: int = 1800, terrain_contacts: str = "all", groups=None) -> list[dict]:
     """One row per condition: its group, name, path figures (player.summarize) and speed share.
-    `terrain_contacts`: the native engine's heightfield contacts (hexa_mjx.engines.terrain_contacts)."""
+    `terrain_contacts`: the native engine's heightfield contacts (hexa_mjx.engines.terrain_contacts);
+    `groups`: only these of TARGETS' groups (the flat row always runs: the speed shares need it)."""
     policy = player.OnnxPolicy(policy_path)
     if policy.metadata["env_config"].get("task") != "velocity":
         raise ValueError(f"{policy_path} is not a velocity-task policy: the battery drives it with the path follower")
-    rows = conditions(policy, terrain_seed)
+    rows = [r for r in conditions(policy, terrain_seed) if not groups or r[0] in groups or r[0] == "flat"]
     base = {**FLAT, "episode_length": episode_length, "terrain_contacts": terrain_contacts}
     summaries = run_conditions(policy_path, [({**base, **o}, r)
                                              for _, _, o, r in rows], episodes, seed, workers, path=SQUARE)
@@ -123,13 +124,14 @@ def main(argv=None) -> int:
     p.add_argument("--terrain_contacts", default="all", choices=["all", "mjx"],
                    help="the rough conditions' heightfield contacts: MuJoCo C's own, or made as MJX makes them "
                         "(hexa_mjx.engines.terrain_contacts)")
+    p.add_argument("--groups", nargs="+", default=None, choices=list(TARGETS), help="only these groups (and flat)")
     p.add_argument("--json", default="", help="write the rows here")
     args = p.parse_args(argv)
     if args.episodes < 1 or args.workers < 1 or args.episode_length < 1:
         p.error("--episodes, --workers and --episode_length must be at least 1")
     try:
         rows = battery(args.policy, args.episodes, args.seed, args.workers, args.terrain_seed, args.episode_length,
-                       args.terrain_contacts)
+                       args.terrain_contacts, args.groups)
     except (FileNotFoundError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
