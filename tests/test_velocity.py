@@ -18,7 +18,7 @@ from hexa_mjx.evaluation import tracking
 from hexa_mjx.evaluation.nav_metrics import segment_distance
 from hexa_mjx.mdp.config import make_config
 from hexa_mjx.robot.kinematics import yaw
-from hexa_mjx.tasks import velocity
+from hexa_mjx.tasks import TASKS, velocity
 
 INTERVAL_STEPS = 3
 
@@ -73,6 +73,12 @@ def test_tracking_reward_is_one_on_the_command_and_heading_mode_turns_toward_the
     assert float(velocity.tracking_lin_vel(None, qpos, qvel, None, None, command)) == pytest.approx(1.0, abs=1e-5)
     assert float(velocity.tracking_ang_vel(None, qpos, qvel, None, None, command)) == pytest.approx(
         np.exp(-0.49 / velocity.TRACKING_SIGMA), rel=1e-4)
+    # The task's own width (tracking_sigma) sets how sharply the terms fall off the command.
+    narrow = TASKS["velocity"](make_config("velocity", tracking_sigma=0.05), vel_env.robot)
+    terms = narrow.reward_terms(["tracking_lin_vel", "tracking_ang_vel"], None, qpos, qvel, None, heading,
+                                np.array([0.4, -0.2, 0.7, 0.0], np.float32))
+    assert float(terms["tracking_lin_vel"]) == pytest.approx(1.0, abs=1e-5)
+    assert float(terms["tracking_ang_vel"]) == pytest.approx(np.exp(-0.49 / 0.05), rel=1e-3)
     in_heading_mode = np.array([0.0, 0.0, 0.0, 1.0])
     asked = vel_env.task.commanded(in_heading_mode, qpos, heading + 0.3)
     assert float(asked[2]) == pytest.approx(velocity.HEADING_GAIN * 0.3, abs=1e-5)
@@ -97,7 +103,8 @@ def test_native_engine_observes_and_tracks_what_mjx_does(vel_env, vel_states):
 
 @pytest.mark.parametrize("settings, message", [
     ({"command_vx": (1.0, -0.5)}, "command_vx is a range"), ({"command_yaw_rate": (0.0, float("inf"))}, "finite"),
-    ({"command_interval": 0.0}, "command_interval"), ({"command_zero_share": 1.5}, "command_zero_share")])
+    ({"command_interval": 0.0}, "command_interval"), ({"command_zero_share": 1.5}, "command_zero_share"),
+    ({"tracking_sigma": 0.0}, "tracking_sigma is a width above 0")])
 def test_bad_command_settings_are_refused_before_anything_is_built(settings, message):
     with pytest.raises(ValueError, match=message):
         NativeEnv(make_config("velocity", **settings))

@@ -206,12 +206,11 @@ def standing_still(task, draws: int = 100_000, seed: int = 0) -> tuple[float, fl
     """The tracking terms' mean per step for a robot that stands still, over `draws` commands of
     `task` (its ranges and class shares): what a policy that has learnt nothing scores."""
     from hexa_mjx.engines.native import NumpyDraws
-    from hexa_mjx.tasks.velocity import TRACKING_SIGMA
 
     rng = NumpyDraws(np.random.default_rng(seed))
     c = np.array([task.draw_command(rng, None)[0] for _ in range(draws)])
-    return (float(np.exp(-(c[:, :2] ** 2).sum(1) / TRACKING_SIGMA).mean()),
-            float(np.exp(-c[:, 2] ** 2 / TRACKING_SIGMA).mean()))
+    sigma = task.config.tracking_sigma
+    return (float(np.exp(-(c[:, :2] ** 2).sum(1) / sigma).mean()), float(np.exp(-c[:, 2] ** 2 / sigma).mean()))
 
 
 def learning_curves(run_dirs, out):

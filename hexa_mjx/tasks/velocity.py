@@ -11,7 +11,7 @@ marker's orientation, whose yaw-rate command is HEADING_GAIN times the heading e
 yaw-rate range. The command is physics state: the model's userdata holds
 (vx, vy, yaw rate, heading mode).
 
-Reward: the field's tracking terms, exp(-error^2 / TRACKING_SIGMA) for the planar velocity and the
+Reward: the field's tracking terms, exp(-error^2 / tracking_sigma) for the planar velocity and the
 yaw rate (legged_gym's and Playground's form and weights), plus the report's contact-aware shaping.
 """
 
@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from hexa_mjx.mdp import observations, rewards
+from hexa_mjx.mdp.config import EnvConfig
 from hexa_mjx.robot.kinematics import namespace, rotate, to_heading_frame, yaw
 from hexa_mjx.tasks.base import Task
 
@@ -28,7 +29,7 @@ from hexa_mjx.tasks.base import Task
 # The shipped velocity policy walks 0.79 to 0.91 of it on flat ground (docs/RESULTS.md).
 LEVEL_UP = 0.5
 LEVEL_DOWN = 0.25
-TRACKING_SIGMA = 0.25  # (m/s)^2 and (rad/s)^2: exp(-error^2 / sigma), legged_gym's and Playground's width
+TRACKING_SIGMA = EnvConfig.tracking_sigma  # (m/s)^2 and (rad/s)^2: the default width, legged_gym's and Playground's
 HEADING_GAIN = 1.0  # 1/s: heading mode's yaw-rate command per rad of heading error
 # Command classes, drawn in equal shares but for "zero" (command_zero_share): pure forward,
 # backward and sideways walking, turning on the spot, diagonal walking, and all three at once.
@@ -47,16 +48,16 @@ def yaw_rate(qpos, qvel):
     return rotate(qvel[3:6], qpos[3:7])[2]
 
 
-def tracking_lin_vel(prev_qpos, qpos, qvel, goal, heading, command):
-    """exp(-|v_cmd - v|^2 / TRACKING_SIGMA) of the planar velocity, heading frame: 1 on the command."""
+def tracking_lin_vel(prev_qpos, qpos, qvel, goal, heading, command, sigma=TRACKING_SIGMA):
+    """exp(-|v_cmd - v|^2 / sigma) of the planar velocity, heading frame: 1 on the command."""
     xp = namespace(qpos)
     error = command[:2] - planar_velocity(qpos, qvel)
-    return xp.exp(-(error @ error) / TRACKING_SIGMA)
+    return xp.exp(-(error @ error) / sigma)
 
 
-def tracking_ang_vel(prev_qpos, qpos, qvel, goal, heading, command):
-    """exp(-(w_cmd - w)^2 / TRACKING_SIGMA) of the yaw rate: 1 on the command."""
-    return namespace(qpos).exp(-((command[2] - yaw_rate(qpos, qvel)) ** 2) / TRACKING_SIGMA)
+def tracking_ang_vel(prev_qpos, qpos, qvel, goal, heading, command, sigma=TRACKING_SIGMA):
+    """exp(-(w_cmd - w)^2 / sigma) of the yaw rate: 1 on the command."""
+    return namespace(qpos).exp(-((command[2] - yaw_rate(qpos, qvel)) ** 2) / sigma)
 
 
 class VelocityTask(Task):
@@ -153,8 +154,9 @@ class VelocityTask(Task):
         return xp.concatenate([planar_velocity(qpos, qvel), yaw_rate(qpos, qvel)[None]])
 
     def reward_terms(self, names, prev_qpos, qpos, qvel, goal, heading, command) -> dict:
-        return super().reward_terms(names, prev_qpos, qpos, qvel, goal, heading,
-                                    self.commanded(command, qpos, heading))
+        commanded, sigma = self.commanded(command, qpos, heading), self.config.tracking_sigma
+        return {name: self.terms[name](prev_qpos, qpos, qvel, goal, heading, commanded, sigma)
+                for name in names if name in self.terms}
 
     def observe(self, qpos, qvel, ctrl, goal, heading, command):
         xp = namespace(qpos)
