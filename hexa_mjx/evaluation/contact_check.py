@@ -40,7 +40,7 @@ def native_contacts(model: mujoco.MjModel, states: np.ndarray) -> list[np.ndarra
         data.qpos[:] = qpos
         mujoco.mj_forward(model, data)
         c, n = data.contact, data.ncon
-        rows = np.stack([c.geom1[:n], c.geom2[:n], c.dist[:n], c.frame[:n, 2]], axis=1).reshape(-1, 4)
+        rows = np.stack([c.geom1[:n], c.geom2[:n], c.dist[:n], c.frame[:n, 2]], axis=1)
         out.append(rows[rows[:, 2] < 0])
     return out
 
@@ -82,9 +82,9 @@ def foot_contacts(per_state: list[np.ndarray], feet: np.ndarray, floor: int) -> 
     return count, depth
 
 
-def summary(per_state: list[np.ndarray], feet: np.ndarray, floor: int) -> str:
+def summary(per_state: list[np.ndarray], count: np.ndarray, depth: np.ndarray) -> str:
+    """One line of an engine's contacts over the states, with their `foot_contacts`."""
     tilts = tilt_degrees(np.concatenate([r[:, 3] for r in per_state]))
-    count, depth = foot_contacts(per_state, feet, floor)
     touching = count > 0
     return (f"{len(tilts)} penetrating contacts ({len(tilts) / len(per_state):.1f} per state); normals tilted over "
             f"10 deg {np.mean(tilts > 10):.0%}, over 45 deg {np.mean(tilts > 45):.0%}; feet touching per state "
@@ -113,12 +113,13 @@ def main(argv=None) -> int:
         return 2
     states = walk_states(policy, env, args.episodes, args.every)
     print(f"{len(states)} states of {args.policy} walking on {args.terrain} at difficulty {args.terrain_difficulty:g}")
-    native, jax_ = native_contacts(env.mj_model, states), mjx_contacts(env.mj_model, states)
-    feet, floor = env.robot.feet, env.robot.floor
-    print("native MuJoCo:", summary(native, feet, floor))
-    print("MJX:          ", summary(jax_, feet, floor))
-    differ = (foot_contacts(native, feet, floor)[0] > 0) != (foot_contacts(jax_, feet, floor)[0] > 0)
-    print(f"states where the engines differ on which feet touch: {differ.any(1).mean():.1%}")
+    touching = []
+    for label, per_state in (("native MuJoCo:", native_contacts(env.mj_model, states)),
+                             ("MJX:          ", mjx_contacts(env.mj_model, states))):
+        count, depth = foot_contacts(per_state, env.robot.feet, env.robot.floor)
+        print(label, summary(per_state, count, depth))
+        touching.append(count > 0)
+    print(f"states where the engines differ on which feet touch: {(touching[0] != touching[1]).any(1).mean():.1%}")
     return 0
 
 

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from hexa_mjx.deploy import player
+from hexa_mjx.engines.terrain_contacts import MODES as CONTACT_MODES
 from hexa_mjx.studies.path_following import PATHS
 from hexa_mjx.studies.robustness import CLEAN, run_conditions, settings
 
@@ -121,7 +122,7 @@ def main(argv=None) -> int:
     p.add_argument("--terrain_seed", type=int, default=1, help="the rough conditions' terrain")
     p.add_argument("--episode_length", type=int, default=1800, help="control steps to finish the path in (30 s)")
     p.add_argument("--workers", type=int, default=1, help="processes that share the episodes")
-    p.add_argument("--terrain_contacts", default="all", choices=["all", "mjx"],
+    p.add_argument("--terrain_contacts", default="all", choices=CONTACT_MODES,
                    help="the rough conditions' heightfield contacts: MuJoCo C's own, or made as MJX makes them "
                         "(hexa_mjx.engines.terrain_contacts)")
     p.add_argument("--groups", nargs="+", default=None, choices=list(TARGETS), help="only these groups (and flat)")

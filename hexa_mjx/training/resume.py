@@ -123,10 +123,15 @@ def exact_resume(saved, cfg, processes: int = 1, process: int = 0) -> tuple[dict
         changed = [k for k, v in schedule(cfg).items() if facts["schedule"].get(k) != v]
         return None, f"{', '.join(changed)} changed since the checkpoint"
     mine = (lambda a: a[process]) if processes > 1 else (lambda a: a)  # noqa: E731
-    env = [mine(arrays[k]) for k in sorted(k for k in arrays if k.startswith("env_"))]
     return {"step": facts["step"], "interval": facts["interval"], "update": facts["update"],
             "local_key": mine(arrays["local_key"]), "key": mine(arrays["key"]) if "key" in arrays else None,
-            "env_state": env, "evaluations": facts["evaluations"]}, ""
+            "env_state": env_leaves(arrays, processes, process), "evaluations": facts["evaluations"]}, ""
+
+
+def env_leaves(arrays: dict, processes: int = 1, process: int = 0) -> list:
+    """This process's environment-state leaves among a checkpoint's saved arrays, in leaf order."""
+    names = sorted(k for k in arrays if k.startswith("env_"))
+    return [arrays[k][process] if processes > 1 else arrays[k] for k in names]
 
 
 def saved_environments(saved, cfg, processes: int = 1, process: int = 0) -> list | None:
@@ -138,5 +143,4 @@ def saved_environments(saved, cfg, processes: int = 1, process: int = 0) -> list
     arrays, facts = saved
     if facts.get("processes", 1) != processes or facts["schedule"].get("num_envs") != cfg.num_envs:
         return None
-    mine = (lambda a: a[process]) if processes > 1 else (lambda a: a)  # noqa: E731
-    return [mine(arrays[k]) for k in sorted(k for k in arrays if k.startswith("env_"))]
+    return env_leaves(arrays, processes, process)
