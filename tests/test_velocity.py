@@ -79,6 +79,14 @@ def test_tracking_reward_is_one_on_the_command_and_heading_mode_turns_toward_the
                                 np.array([0.4, -0.2, 0.7, 0.0], np.float32))
     assert float(terms["tracking_lin_vel"]) == pytest.approx(1.0, abs=1e-5)
     assert float(terms["tracking_ang_vel"]) == pytest.approx(np.exp(-0.49 / 0.05), rel=1e-3)
+    # The yaw-rate term can have a width of its own.
+    split = TASKS["velocity"](make_config("velocity", tracking_sigma=0.05, yaw_tracking_sigma=0.5), vel_env.robot)
+    qvel_slow = qvel.copy()
+    qvel_slow[:2] *= 0.5  # half the commanded planar velocity
+    terms = split.reward_terms(["tracking_lin_vel", "tracking_ang_vel"], None, qpos, qvel_slow, None, heading,
+                               np.array([0.4, -0.2, 0.7, 0.0], np.float32))
+    assert float(terms["tracking_lin_vel"]) == pytest.approx(np.exp(-(0.2 ** 2 + 0.1 ** 2) / 0.05), rel=1e-3)
+    assert float(terms["tracking_ang_vel"]) == pytest.approx(np.exp(-0.49 / 0.5), rel=1e-3)
     in_heading_mode = np.array([0.0, 0.0, 0.0, 1.0])
     asked = vel_env.task.commanded(in_heading_mode, qpos, heading + 0.3)
     assert float(asked[2]) == pytest.approx(velocity.HEADING_GAIN * 0.3, abs=1e-5)
@@ -104,7 +112,8 @@ def test_native_engine_observes_and_tracks_what_mjx_does(vel_env, vel_states):
 @pytest.mark.parametrize("settings, message", [
     ({"command_vx": (1.0, -0.5)}, "command_vx is a range"), ({"command_yaw_rate": (0.0, float("inf"))}, "finite"),
     ({"command_interval": 0.0}, "command_interval"), ({"command_zero_share": 1.5}, "command_zero_share"),
-    ({"tracking_sigma": 0.0}, "tracking_sigma is a width above 0")])
+    ({"tracking_sigma": 0.0}, "tracking_sigma is a width above 0"),
+    ({"yaw_tracking_sigma": -0.1}, "yaw_tracking_sigma is a width above 0")])
 def test_bad_command_settings_are_refused_before_anything_is_built(settings, message):
     with pytest.raises(ValueError, match=message):
         NativeEnv(make_config("velocity", **settings))

@@ -209,8 +209,9 @@ def standing_still(task, draws: int = 100_000, seed: int = 0) -> tuple[float, fl
 
     rng = NumpyDraws(np.random.default_rng(seed))
     c = np.array([task.draw_command(rng, None)[0] for _ in range(draws)])
-    sigma = task.config.tracking_sigma
-    return (float(np.exp(-(c[:, :2] ** 2).sum(1) / sigma).mean()), float(np.exp(-c[:, 2] ** 2 / sigma).mean()))
+    sigma = task.widths()
+    return (float(np.exp(-(c[:, :2] ** 2).sum(1) / sigma["tracking_lin_vel"]).mean()),
+            float(np.exp(-c[:, 2] ** 2 / sigma["tracking_ang_vel"]).mean()))
 
 
 def learning_curves(run_dirs, out):
@@ -233,9 +234,12 @@ def learning_curves(run_dirs, out):
     for k, run in enumerate(map(Path, run_dirs)):
         cfg = load_config(run)
         scales = run_scales(cfg)
-        ranges = (tuple(cfg.command_vx), tuple(cfg.command_vy), tuple(cfg.command_yaw_rate))
+        task = make_env_for(cfg).task
+        widths = task.widths()
+        ranges = (tuple(cfg.command_vx), tuple(cfg.command_vy), tuple(cfg.command_yaw_rate),
+                  widths["tracking_lin_vel"], widths["tracking_ang_vel"])
         if ranges not in baselines:
-            baselines[ranges] = standing_still(make_env_for(cfg).task, draws=20_000)
+            baselines[ranges] = standing_still(task, draws=20_000)
         rows = [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines() if line.strip()]
         for ax, term in zip(axes, ("tracking_lin_vel", "tracking_ang_vel")):
             ax.plot([r["step"] / 1e6 for r in rows],
@@ -243,11 +247,11 @@ def learning_curves(run_dirs, out):
                     "o-", color=f"C{k}", label=run.name)
     for ax, title, i in zip(axes, ("planar velocity", "yaw rate"), (0, 1)):
         for n, (ranges, still) in enumerate(baselines.items()):
-            vx, _, wz = ranges
+            vx, _, wz, *sigma = ranges
             ax.axhline(still[i], color="gray", ls=("--", ":", "-.")[n % 3],
-                       label=f"standing still, vx to {vx[1]:g} m/s, yaw to {wz[1]:g} rad/s")
+                       label=f"standing still, vx to {vx[1]:g} m/s, yaw to {wz[1]:g} rad/s, sigma {sigma[i]:g}")
         ax.set_xlabel("env steps, millions")
-        ax.set_title(f"{title} tracking per step, exp(-error^2 / 0.25)", fontsize=9)
+        ax.set_title(f"{title} tracking per step, exp(-error^2 / sigma)", fontsize=9)
         ax.set_ylim(0, 1)
     axes[0].legend(fontsize=7)
     fig.tight_layout()

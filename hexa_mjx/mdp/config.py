@@ -79,7 +79,10 @@ class EnvConfig:
     command_interval: float = setting(4.0, "velocity: s each command holds before the next is drawn")
     command_zero_share: float = setting(0.1, "velocity: share of the commands that are exactly zero (stand still)")
     tracking_sigma: float = setting(0.25, "velocity: width of the tracking terms exp(-error^2 / sigma), (m/s)^2 and "
-                                    "(rad/s)^2 (legged_gym's and Playground's 0.25)")
+                                    "(rad/s)^2 (legged_gym's and Playground's 0.25); the yaw-rate term's too unless "
+                                    "--yaw_tracking_sigma is set")
+    yaw_tracking_sigma: float = setting(0.0, "velocity: width of the yaw-rate tracking term alone, (rad/s)^2, as "
+                                        "Isaac Lab sets each term's own; 0: the same as --tracking_sigma")
     command_heading_share: float = setting(0.0, "velocity: share of the commands that give a heading to turn to "
                                                 "instead of a yaw rate (legged_gym's heading mode)")
     # Leg failure: a failed leg's three servos stop working. The policy is not told which leg failed.
@@ -193,6 +196,9 @@ def check_config(config: EnvConfig) -> None:
         raise ValueError(f"command_interval must be a time above 0 s, got {config.command_interval}")
     if not (math.isfinite(config.tracking_sigma) and config.tracking_sigma > 0):
         raise ValueError(f"tracking_sigma is a width above 0, got {config.tracking_sigma}")
+    if not (math.isfinite(config.yaw_tracking_sigma) and config.yaw_tracking_sigma >= 0):
+        raise ValueError(f"yaw_tracking_sigma is a width above 0 (or 0 for tracking_sigma's), got "
+                         f"{config.yaw_tracking_sigma}")
     for name in ("command_zero_share", "command_heading_share"):
         if not 0 <= getattr(config, name) <= 1:
             raise ValueError(f"{name} is a share from 0 to 1, got {getattr(config, name)}")

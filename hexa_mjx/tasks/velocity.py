@@ -11,8 +11,9 @@ marker's orientation, whose yaw-rate command is HEADING_GAIN times the heading e
 yaw-rate range. The command is physics state: the model's userdata holds
 (vx, vy, yaw rate, heading mode).
 
-Reward: the field's tracking terms, exp(-error^2 / tracking_sigma) for the planar velocity and the
-yaw rate (legged_gym's and Playground's form and weights), plus the report's contact-aware shaping.
+Reward: the field's tracking terms, exp(-error^2 / sigma) for the planar velocity and the yaw rate
+(legged_gym's and Playground's form and weights; each term's width its own setting, as Isaac Lab
+has), plus the report's contact-aware shaping.
 """
 
 from __future__ import annotations
@@ -153,9 +154,14 @@ class VelocityTask(Task):
         xp = namespace(qpos)
         return xp.concatenate([planar_velocity(qpos, qvel), yaw_rate(qpos, qvel)[None]])
 
+    def widths(self) -> dict:
+        """Each tracking term's width sigma: (m/s)^2 for the planar velocity, (rad/s)^2 for the yaw rate."""
+        cfg = self.config
+        return {"tracking_lin_vel": cfg.tracking_sigma, "tracking_ang_vel": cfg.yaw_tracking_sigma or cfg.tracking_sigma}
+
     def reward_terms(self, names, prev_qpos, qpos, qvel, goal, heading, command) -> dict:
-        commanded, sigma = self.commanded(command, qpos, heading), self.config.tracking_sigma
-        return {name: self.terms[name](prev_qpos, qpos, qvel, goal, heading, commanded, sigma)
+        commanded, sigma = self.commanded(command, qpos, heading), self.widths()
+        return {name: self.terms[name](prev_qpos, qpos, qvel, goal, heading, commanded, sigma[name])
                 for name in names if name in self.terms}
 
     def observe(self, qpos, qvel, ctrl, goal, heading, command):

@@ -73,6 +73,7 @@ class TrainConfig:
     command_interval: float = env_field("command_interval")
     command_zero_share: float = env_field("command_zero_share")
     tracking_sigma: float = env_field("tracking_sigma")
+    yaw_tracking_sigma: float = env_field("yaw_tracking_sigma")
     command_heading_share: float = env_field("command_heading_share")
     leg_failure: str = env_field("leg_failure")
     leg_failure_rate: float = env_field("leg_failure_rate")
