@@ -234,22 +234,22 @@ def learning_curves(run_dirs, out):
     for k, run in enumerate(map(Path, run_dirs)):
         cfg = load_config(run)
         scales = run_scales(cfg)
-        task = make_env_for(cfg).task
-        widths = task.widths()
         ranges = (tuple(cfg.command_vx), tuple(cfg.command_vy), tuple(cfg.command_yaw_rate),
-                  widths["tracking_lin_vel"], widths["tracking_ang_vel"])
-        if ranges not in baselines:
-            baselines[ranges] = standing_still(task, draws=20_000)
+                  cfg.tracking_sigma, cfg.yaw_tracking_sigma)
+        if ranges not in baselines:  # an environment is built only for commands not yet seen
+            task = make_env_for(cfg).task
+            baselines[ranges] = (standing_still(task, draws=20_000), task.widths())
         rows = [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines() if line.strip()]
         for ax, term in zip(axes, ("tracking_lin_vel", "tracking_ang_vel")):
             ax.plot([r["step"] / 1e6 for r in rows],
                     [r[f"eval/episode_reward/{term}"] / r["episode_length"] / scales[term] for r in rows],
                     "o-", color=f"C{k}", label=run.name)
     for ax, title, i in zip(axes, ("planar velocity", "yaw rate"), (0, 1)):
-        for n, (ranges, still) in enumerate(baselines.items()):
-            vx, _, wz, *sigma = ranges
+        for n, (ranges, (still, widths)) in enumerate(baselines.items()):
+            vx, _, wz = ranges[:3]
+            sigma = widths[("tracking_lin_vel", "tracking_ang_vel")[i]]
             ax.axhline(still[i], color="gray", ls=("--", ":", "-.")[n % 3],
-                       label=f"standing still, vx to {vx[1]:g} m/s, yaw to {wz[1]:g} rad/s, sigma {sigma[i]:g}")
+                       label=f"standing still, vx to {vx[1]:g} m/s, yaw to {wz[1]:g} rad/s, sigma {sigma:g}")
         ax.set_xlabel("env steps, millions")
         ax.set_title(f"{title} tracking per step, exp(-error^2 / sigma)", fontsize=9)
         ax.set_ylim(0, 1)
