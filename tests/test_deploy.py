@@ -19,21 +19,25 @@ from hexa_mjx.engines.native import NativeEnv
 from hexa_mjx.tasks import TASKS
 
 POLICIES = robot.REPO_ROOT / "policies"
-SHIPPED = ("goal", "navigate", "velocity")
+SHIPPED = ("goal", "navigate", "velocity", "generalist")  # policies/<name>: a run directory and its ONNX
 # m/s: about two and a half times the shipped velocity policy's RMS error in native MuJoCo over 32
 # episodes (0.076; single episodes reach 0.10).
 VELOCITY_RMS_BOUND = 0.2
+# Conditions the shipped generalist policy completes in all 8 of the battery's episodes
+# (docs/RESULTS.md, "The shipped generalist policy"); the test walks two of each.
+GENERALIST_CONDITIONS = ({"terrain": "stairs", "terrain_seed": 1, "terrain_difficulty": 1.0},
+                         {"disabled_legs": (6,), "failure_mode": "locked"})
 
 
 @pytest.fixture(scope="module")
 def shipped():
-    """(config, params, ONNX policy) of each shipped policy, by task."""
+    """(config, params, ONNX policy) of each shipped policy, by name."""
     out = {}
-    for task in SHIPPED:
-        run_dir, ckpt = checkpoints.resolve_checkpoint(POLICIES / task)
+    for name in SHIPPED:
+        run_dir, ckpt = checkpoints.resolve_checkpoint(POLICIES / name)
         cfg = config.load_config(run_dir)
         _, params = checkpoints.load_checkpoint(ckpt, training.init_params(cfg, config.make_env_for(cfg)))
-        out[task] = (cfg, params, player.OnnxPolicy(POLICIES / f"{task}.onnx"))
+        out[name] = (cfg, params, player.OnnxPolicy(POLICIES / f"{name}.onnx"))
     return out
 
 
@@ -55,9 +59,9 @@ def test_native_foot_stance_and_power():
     assert env.foot_stance().tolist() == [False] * 6 and env.servo_power() > 0.0
 
 
-@pytest.mark.parametrize("task", SHIPPED)
-def test_onnx_matches_the_jax_policy(shipped, task):
-    cfg, params, policy = shipped[task]
+@pytest.mark.parametrize("name", SHIPPED)
+def test_onnx_matches_the_jax_policy(shipped, name):
+    cfg, params, policy = shipped[name]
     env = config.make_env_for(cfg)
     act = jax.jit(jax.vmap(training.make_inference(cfg, env, params), in_axes=(0, None)))
     # 1,000 observations spread like the ones training saw (the normalizer's statistics).
@@ -175,6 +179,19 @@ def test_shipped_velocity_policy_follows_its_commands_on_the_current_model(shipp
     tracked = player.tracking(env, results)
     # Native MuJoCo, three episodes of random commands (docs/RESULTS.md, "Velocity commands").
     assert summary["fall_rate"] == 0.0 and tracked["velocity_rms"] < VELOCITY_RMS_BOUND, (summary, tracked)
+
+
+def test_shipped_generalist_walks_the_square_on_stairs_and_on_a_failed_leg(shipped):
+    """Native MuJoCo through the path follower, as the battery walks it (hexa_mjx.studies.generalist,
+    MJX's heightfield contacts): the 2 m square up and down 5 cm stairs on a terrain the training
+    never drew, and on flat ground with a leg the policy does not observe failed."""
+    from hexa_mjx.studies import generalist, robustness
+
+    base = {**generalist.FLAT, "episode_length": 1800, "terrain_contacts": "mjx"}
+    conditions = [({**base, **overrides}, None) for overrides in GENERALIST_CONDITIONS]
+    rows = robustness.run_conditions(str(POLICIES / "generalist.onnx"), conditions, episodes=2, path=generalist.SQUARE)
+    for overrides, row in zip(GENERALIST_CONDITIONS, rows):
+        assert row["path_completed_rate"] == 1.0 and row["fall_rate"] == 0.0, (overrides, row)
 
 
 def run_play(*args, env=None):
