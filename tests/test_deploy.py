@@ -181,7 +181,7 @@ def test_shipped_velocity_policy_follows_its_commands_on_the_current_model(shipp
     assert summary["fall_rate"] == 0.0 and tracked["velocity_rms"] < VELOCITY_RMS_BOUND, (summary, tracked)
 
 
-def test_shipped_generalist_walks_the_square_on_stairs_and_on_a_failed_leg(shipped):
+def test_shipped_generalist_walks_the_square_on_stairs_and_on_a_failed_leg():
     """Native MuJoCo through the path follower, as the battery walks it (hexa_mjx.studies.generalist,
     MJX's heightfield contacts): the 2 m square up and down 5 cm stairs on a terrain the training
     never drew, and on flat ground with a leg the policy does not observe failed."""
