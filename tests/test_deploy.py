@@ -187,7 +187,7 @@ def test_shipped_generalist_walks_the_square_on_stairs_and_on_a_failed_leg():
     never drew, and on flat ground with a leg the policy does not observe failed."""
     from hexa_mjx.studies import generalist, robustness
 
-    base = {**generalist.FLAT, "episode_length": 1800, "terrain_contacts": "mjx"}
+    base = generalist.base_settings(terrain_contacts="mjx")
     conditions = [({**base, **overrides}, None) for overrides in GENERALIST_CONDITIONS]
     rows = robustness.run_conditions(str(POLICIES / "generalist.onnx"), conditions, episodes=2, path=generalist.SQUARE)
     for overrides, row in zip(GENERALIST_CONDITIONS, rows):

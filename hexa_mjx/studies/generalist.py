@@ -30,6 +30,7 @@ from hexa_mjx.studies.robustness import CLEAN, run_conditions, settings
 SQUARE = PATHS["square"]  # m from the start, world frame
 PATH_LENGTH = float(np.linalg.norm(np.diff([(0.0, 0.0), *SQUARE], axis=0), axis=1).sum())  # m: 8
 FLAT = {**CLEAN, "terrain": "flat"}  # every condition's base: the policy may have trained on a terrain
+EPISODE_LENGTH = 1800  # control steps to finish the path in: 30 s at 60 Hz
 # Group -> (least success, least speed share of intact, most falls); None: no such target.
 TARGETS = {"flat": (0.95, None, 0.02), "rough": (0.90, None, None), "push": (None, None, 0.05),
            "physics": (0.90, None, None), "one leg": (0.90, 0.70, None), "two legs": (0.75, None, None)}
@@ -57,7 +58,7 @@ def conditions(policy: player.OnnxPolicy, terrain_seed: int) -> list[tuple[str, 
 
 
 def battery(policy_path: str, episodes: int, seed: int = 0, workers: int = 1, terrain_seed: int = 1,
-            episode_length: int = 1800, terrain_contacts: str = "all", groups=None) -> list[dict]:
+            episode_length: int = EPISODE_LENGTH, terrain_contacts: str = "all", groups=None) -> list[dict]:
     """One row per condition: its group, name, path figures (player.summarize) and speed share.
     `terrain_contacts`: the native engine's heightfield contacts (hexa_mjx.engines.terrain_contacts);
     `groups`: only these of TARGETS' groups (the flat row always runs: the speed shares need it)."""
@@ -65,7 +66,7 @@ def battery(policy_path: str, episodes: int, seed: int = 0, workers: int = 1, te
     if policy.metadata["env_config"].get("task") != "velocity":
         raise ValueError(f"{policy_path} is not a velocity-task policy: the battery drives it with the path follower")
     rows = [r for r in conditions(policy, terrain_seed) if not groups or r[0] in groups or r[0] == "flat"]
-    base = {**FLAT, "episode_length": episode_length, "terrain_contacts": terrain_contacts}
+    base = base_settings(episode_length, terrain_contacts)
     summaries = run_conditions(policy_path, [({**base, **o}, r)
                                              for _, _, o, r in rows], episodes, seed, workers, path=SQUARE)
     out = [{"group": group, "condition": name, **summary} for (group, name, _, _), summary in zip(rows, summaries)]
@@ -76,6 +77,12 @@ def battery(policy_path: str, episodes: int, seed: int = 0, workers: int = 1, te
         row["speed_share_of_intact"] = intact / time if time and intact else None
         row["meets_target"] = meets(row)
     return out
+
+
+def base_settings(episode_length: int = EPISODE_LENGTH, terrain_contacts: str = "all") -> dict:
+    """Every condition's settings before its own overrides: FLAT, the time to finish the path and
+    the native engine's heightfield contacts."""
+    return {**FLAT, "episode_length": episode_length, "terrain_contacts": terrain_contacts}
 
 
 def meets(row: dict) -> bool:
@@ -120,7 +127,7 @@ def main(argv=None) -> int:
     p.add_argument("--episodes", type=int, default=32, help="per condition")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--terrain_seed", type=int, default=1, help="the rough conditions' terrain")
-    p.add_argument("--episode_length", type=int, default=1800, help="control steps to finish the path in (30 s)")
+    p.add_argument("--episode_length", type=int, default=EPISODE_LENGTH, help="control steps to finish the path in (30 s)")
     p.add_argument("--workers", type=int, default=1, help="processes that share the episodes")
     p.add_argument("--terrain_contacts", default="all", choices=CONTACT_MODES,
                    help="the rough conditions' heightfield contacts: MuJoCo C's own, or made as MJX makes them "
