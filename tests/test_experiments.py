@@ -164,3 +164,31 @@ def test_seed_summary_reports_median_iqr_and_worst_of_eval_and_play_files(tmp_pa
     assert seed_summary.figures(json.loads(native.read_text()))["success"] == pytest.approx(50.0)
     with pytest.raises(SystemExit):
         seed_summary.main([str(tmp_path / "missing.json")])
+
+
+def test_seed_summary_of_generalist_batteries(tmp_path, capsys):
+    from hexa_mjx.studies import seed_summary
+
+    # Three seeds, two conditions: completions 100/90/80% (all meet) and 50/100/75% (the first misses).
+    files = []
+    for seed, (flat, leg, leg_met) in enumerate([(1.0, 0.5, False), (0.9, 1.0, True), (0.8, 0.75, True)]):
+        rows = [{"group": "flat", "condition": "flat, intact", "path_completed_rate": flat, "fall_rate": 0.0,
+                 "meets_target": True},
+                {"group": "one leg", "condition": "leg 1 limp", "path_completed_rate": leg, "fall_rate": 0.0,
+                 "meets_target": leg_met}]
+        (tmp_path / f"gen-s{seed}").mkdir()
+        files.append(tmp_path / f"gen-s{seed}" / "battery.json")
+        files[-1].write_text(json.dumps(rows))
+    seed_summary.main(["--battery", *map(str, files)])
+    out = capsys.readouterr().out
+    assert "| flat, intact | 100% | 90% | 80% | 90% | 85 to 95% | 80% | 3 of 3 |" in out
+    assert "| leg 1 limp | 50%* | 100% | 75% | 75% | 62 to 88% | 50% | 2 of 3 |" in out
+    assert "1 of 2 conditions met by every seed" in out
+    other = tmp_path / "other.json"  # a battery of other conditions
+    other.write_text(json.dumps([{"condition": "stairs 5 cm", "path_completed_rate": 1.0, "meets_target": True}] * 2))
+    with pytest.raises(SystemExit):
+        seed_summary.main(["--battery", str(files[0]), str(other)])
+    evaluation = tmp_path / "eval.json"  # an eval.py file is not a battery
+    evaluation.write_text(json.dumps({"summary": {"success_rate": 1.0}}))
+    with pytest.raises(SystemExit):
+        seed_summary.main(["--battery", str(files[0]), str(evaluation)])

@@ -44,11 +44,13 @@ def test_train_writes_run_directory(trained):
 
 
 def test_training_program_is_compiled_once_and_kept_in_the_cache(trained, cache_env):
-    """hexa_mjx.training.ppo's update has no host callback, so JAX's cache keeps it (brax's training epoch,
-    with the progress line's and Adam's callbacks, was compiled afresh by every run)."""
+    """hexa_mjx.training.ppo's update has no host callback, so it can be kept (brax's training epoch,
+    with the progress line's and Adam's callbacks, was compiled afresh by every run): the run keeps
+    its compiled reset, update and evaluation in the cache folder's programs/ (program_store)."""
     _, proc = trained
     assert proc.stderr.count("Compiling update (") == 1, proc.stderr[-3000:]
-    assert list(Path(cache_env["JAX_COMPILATION_CACHE_DIR"]).glob("pmap_update-*"))
+    kept = Path(cache_env["JAX_COMPILATION_CACHE_DIR"]) / "programs"
+    assert all(list(kept.glob(f"{name}-*.bin")) for name in ("reset", "update", "evaluation"))
 
 
 def test_saved_config_round_trips(trained):

@@ -23,6 +23,7 @@ import jax.numpy as jp
 import numpy as np
 
 from hexa_mjx.mdp import randomization
+from hexa_mjx.training import program_store
 
 
 def brax_eval_key(seed: int, process_index: int = 0) -> jax.Array:
@@ -64,8 +65,10 @@ class RunEvaluator:
     `make_policy` from (normalizer, policy) params shaped like `params_template`."""
 
     def __init__(self, eval_env, wrap_env_fn, randomization_fn, make_policy, params_template, num_eval_envs: int,
-                 episode_length: int, seed: int, done: int = 0):
-        """`done`: evaluations this run has already run (an exact resume continues their keys)."""
+                 episode_length: int, seed: int, done: int = 0, programs=None):
+        """`done`: evaluations this run has already run (an exact resume continues their keys).
+        `programs` (JSON-able: what the environment and wrappers were made from) keeps the compiled
+        evaluation in `program_store` under it."""
         from brax import envs
         from brax.envs.wrappers.training import EvalWrapper
         from brax.training import acting
@@ -93,6 +96,7 @@ class RunEvaluator:
         self.program = jax.pmap(episodes, in_axes=(None, 0, None, model_axes),
                                 devices=jax.local_devices()[:self.devices])
         self.template, self.compiled, self.error, self.thread = params_template, None, None, None
+        self.programs = None if programs is None else [programs, num_eval_envs, episode_length]
 
     def compile_in_background(self) -> None:
         """Start compiling the evaluation program on a thread; the next call waits for it."""
@@ -106,7 +110,8 @@ class RunEvaluator:
 
     def _compile(self, params) -> None:
         try:
-            self.compiled = self.program.lower(*self._inputs(params, self.key)).compile()
+            self.compiled = program_store.compiled(self.program, self._inputs(params, self.key), "evaluation",
+                                                   self.programs)
         except Exception as e:  # noqa: BLE001 - raised again by the first call, on the caller's thread
             self.error = e
 

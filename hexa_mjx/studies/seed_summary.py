@@ -3,8 +3,12 @@ interquartile range and the worst seed (rliable's way of reporting few runs: Aga
 
     python -m hexa_mjx.studies.seed_summary runs/velocity-s*/eval256/metrics.json
     python -m hexa_mjx.studies.seed_summary runs/velocity-s*/native.json --json summary.json
+    python -m hexa_mjx.studies.seed_summary --battery runs/gen-s*/battery-mjx.json
 
 Reads eval.py's metrics.json and play.py's --json files alike; a figure one of them lacks is "-".
+With --battery, the files are the generalist battery's (`hexa_mjx.studies.generalist --json`), and
+the table has one row per condition: each seed's path completion, the median, IQR and worst, and
+how many seeds meet the condition's target.
 """
 
 from __future__ import annotations
@@ -91,6 +95,31 @@ def table(labels: list[str], rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def battery_table(labels: list[str], batteries: list[list[dict]]) -> str:
+    """Markdown: one row per battery condition (hexa_mjx.studies.generalist), each seed's share of
+    paths completed (`*`: that seed misses the condition's target), their median, IQR and worst, and
+    the seeds that meet the target; last, the conditions every seed meets."""
+    names = [r["condition"] for r in batteries[0]]
+    for label, rows in zip(labels, batteries):
+        if [r["condition"] for r in rows] != names:
+            raise ValueError(f"{label} ran other conditions than {labels[0]}: give batteries of the same groups")
+    lines = ["| condition | " + " | ".join(labels) + " | median | IQR | worst | seeds meeting its target |",
+             "|---" * (len(labels) + 5) + "|"]
+    every = 0
+    for i, name in enumerate(names):
+        rows = [rows[i] for rows in batteries]
+        done = np.array([100.0 * r["path_completed_rate"] for r in rows])
+        q25, median, q75 = np.percentile(done, [25, 50, 75])
+        met = sum(bool(r["meets_target"]) for r in rows)
+        every += met == len(rows)
+        cells = [f"{d:.0f}%{'' if r['meets_target'] else '*'}" for d, r in zip(done, rows)]
+        lines.append(f"| {name} | " + " | ".join(cells) + f" | {median:.0f}% | {q25:.0f} to {q75:.0f}% | "
+                     f"{done.min():.0f}% | {met} of {len(rows)} |")
+    lines.append(f"\n{every} of {len(names)} conditions met by every seed (paths completed; `*`: a seed misses "
+                 "the target, which for some groups also bounds falls or speed)")
+    return "\n".join(lines)
+
+
 def label_of(path: Path) -> str:
     """A run's name from its file: the run folder's (eval.py's metrics.json sits one folder down)."""
     parent = path.parent
@@ -102,10 +131,21 @@ def main(argv=None) -> None:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("files", nargs="+", type=Path, help="eval.py metrics.json or play.py --json files, one per seed")
     parser.add_argument("--json", type=Path, help="also write the per-run figures and the summary here")
+    parser.add_argument("--battery", action="store_true",
+                        help="the files are generalist batteries (python -m hexa_mjx.studies.generalist --json)")
     args = parser.parse_args(argv)
     missing = [str(f) for f in args.files if not f.is_file()]
     if missing:
         parser.error(f"no such file: {', '.join(missing)} (give eval.py's metrics.json or play.py's --json output)")
+    if args.battery:
+        batteries = [json.loads(f.read_text()) for f in args.files]
+        if not all(isinstance(b, list) and b and "meets_target" in b[0] for b in batteries):
+            parser.error("--battery reads the generalist battery's --json files (a list of conditions)")
+        try:
+            print(battery_table([f.parent.name for f in args.files], batteries))
+        except ValueError as e:
+            parser.error(str(e))
+        return
     rows = [figures(json.loads(f.read_text())) for f in args.files]
     labels = [label_of(f) for f in args.files]
     print(table(labels, rows))

@@ -122,6 +122,16 @@ def failure_schedule_for(cfg: TrainConfig, start_step: int) -> dict | None:
     return dict(start_after=-(-after // cfg.num_envs), adaptive=cfg.leg_failure_adaptive)
 
 
+HOST_ONLY = ("run_dir", "resume", "progress", "record_optimizer", "compile_cache", "process_wait_timeout",
+             "coordinator_timeout")  # config fields no compiled program depends on
+
+
+def program_description(cfg: TrainConfig, offset: int) -> dict:
+    """What a run's environments, wrappers and networks are made from, as `program_store` keys its
+    compiled programs: the config less its host-only fields, and the step its counts start from."""
+    return {**{k: v for k, v in dataclasses.asdict(cfg).items() if k not in HOST_ONLY}, "offset": offset}
+
+
 def resume_point(cfg: TrainConfig, run_dir: Path, template, optimizer_template) -> tuple[int, object, object, object]:
     """(step, params, Adam state, saved position) to continue from: (0, None, None, None) for a new
     run, or one with no readable checkpoint; the Adam state is None for a checkpoint saved without
@@ -206,10 +216,12 @@ def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
     # that row is missing (a crash between the two, or a run from before rows were written first).
     evaluate_start = not row_kept and (cfg.eval_at_start or start_step > 0) and not position
     randomization_fn = randomization.randomization_fn(env) if cfg.randomize else None
+    programs = program_description(cfg, offset)  # what the kept compiled programs are keyed by
     evaluator = RunEvaluator(eval_env, wrap_env_fn(eval_env, cfg.randomize), randomization_fn,
                              policy_maker(cfg, eval_env), template, cfg.num_eval_envs,
                              cfg.episode_length, seed=cfg.seed + offset,
-                             done=position["evaluations"] if position else 0) if main else None
+                             done=position["evaluations"] if position else 0,
+                             programs=programs) if main else None
 
     def on_interval(step, make_policy, params, adam, env_state, at):  # before training, after each interval
         first = step == start_step - offset
@@ -278,7 +290,8 @@ def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
               randomization_fn=randomization_fn, restore_params=restore, restore_adam=optimizer,
               anneal_lr=(offset, cfg.num_timesteps) if cfg.anneal_lr else None,
               on_interval=on_interval, on_update=on_update, resume=position, environments=environments,
-              stop=asked_to_stop if stop is not None else None, on_stop=on_stop)
+              stop=asked_to_stop if stop is not None else None, on_stop=on_stop,
+              programs=programs)
     total = time.time() - t0
     if logger is None:
         print(f"process {jax.process_index()} done: {remaining:,} steps in {total / 60:.1f} min")

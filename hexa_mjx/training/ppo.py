@@ -28,6 +28,8 @@ from brax.training.agents.ppo import losses as ppo_losses
 from brax.training.agents.ppo import networks as ppo_networks
 from brax.training.agents.ppo.train import TrainingState
 
+from hexa_mjx.training import program_store
+
 AXIS = "i"  # the pmap axis the gradients and the normalizer are averaged over
 UNROLL_FIELDS = ("truncation", "episode_metrics", "episode_done")
 
@@ -107,7 +109,8 @@ class Position:
 def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=None, randomization_fn=None,
           restore_params=None, restore_adam=None, anneal_lr: tuple[int, int] | None = None,
           on_interval: Callable | None = None, on_update: Callable | None = None, resume: dict | None = None,
-          environments: list | None = None, stop: Callable | None = None, on_stop: Callable | None = None):
+          environments: list | None = None, stop: Callable | None = None, on_stop: Callable | None = None,
+          programs: object = None):
     """PPO as brax's `ppo.train` runs it (the same `settings` and `network_factory`), for
     `settings.num_timesteps` env steps in `settings.num_evals - 1` intervals. On every process,
     `on_interval(step, make_policy, params, adam_state, env_state)` is called before training and
@@ -123,7 +126,10 @@ def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=No
     `environments` (the environment state's saved leaves) continues the training environments as
     they were under a new schedule, where they fit this run's (else they start afresh). `stop()` is
     asked after every update; when it says so, `on_stop(step, params, adam_state, position)` is
-    called and training returns early. Returns the final (normalizer, policy, value) params."""
+    called and training returns early. `programs` (JSON-able: what the environment, wrappers and
+    networks were made from) keeps the compiled reset and update in `program_store` under it, so
+    that a second run loads them without tracing. Returns the final (normalizer, policy, value)
+    params."""
     if not settings.normalize_observations:
         raise ValueError("hexa_mjx's PPO always normalizes observations")
     process_id, process_count = jax.process_index(), jax.process_count()
@@ -149,7 +155,12 @@ def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=No
     env = (wrap_env_fn or envs.training.wrap)(environment, episode_length=settings.episode_length, action_repeat=1,
                                              randomization_fn=randomize)
     key_envs = jax.random.split(key_env, settings.num_envs // process_count)
-    env_state = jax.pmap(env.reset, axis_name=AXIS)(key_envs.reshape((len(devices), -1) + key_envs.shape[1:]))
+    reset_keys = key_envs.reshape((len(devices), -1) + key_envs.shape[1:])
+    reset = jax.pmap(env.reset, axis_name=AXIS)
+    if programs is not None:  # PPO's settings shape the programs too
+        programs = [programs, dataclasses.asdict(settings), anneal_lr]
+        reset = program_store.compiled(reset, (reset_keys,), "reset", programs)
+    env_state = reset(reset_keys)
     leaves = resume["env_state"] if resume is not None else environments
     if leaves is not None:  # the environments as they were: same structure, saved leaves
         expected = jax.tree.leaves(env_state)
@@ -223,7 +234,7 @@ def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=No
             key = jax.random.split(epoch_key, len(devices))
         for done in range(first_update if interval == first_interval else 0, updates_per_interval):
             if not compiled:  # the first update compiles: on a thread, so that a signal is answered meanwhile
-                update, compiled = compile_aside(update, state, env_state, key), True
+                update, compiled = compile_aside(update, state, env_state, key, programs=programs), True
             state, env_state, key = update(state, env_state, key)
             step += steps_per_update
             if on_update is not None:
@@ -245,16 +256,17 @@ def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=No
     return jax.tree.map(np.asarray, unpmap((state.normalizer_params, state.params.policy, state.params.value)))
 
 
-def compile_aside(fn, *args):
+def compile_aside(fn, *args, programs=None):
     """`fn` (jitted or pmapped) compiled for `args` on a worker thread, while this thread waits in
     short joins: XLA's compile holds the thread that runs it for up to a minute, and Python
     answers a signal (train.py's SIGTERM) only between its own bytecodes. The same program as
-    `fn(*args)` would compile, from the same cache."""
+    `fn(*args)` would compile, from the same cache; kept in `program_store` under `programs`
+    unless that is None."""
     result = {}
 
     def work():
         try:
-            result["compiled"] = fn.lower(*args).compile()
+            result["compiled"] = program_store.compiled(fn, args, "update", programs)
         except Exception as e:  # noqa: BLE001 - raised again on the caller's thread
             result["error"] = e
 
