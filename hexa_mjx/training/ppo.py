@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import threading
 from typing import Callable
 
 import jax
@@ -234,7 +233,7 @@ def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=No
             key = jax.random.split(epoch_key, len(devices))
         for done in range(first_update if interval == first_interval else 0, updates_per_interval):
             if not compiled:  # the first update compiles: on a thread, so that a signal is answered meanwhile
-                update, compiled = compile_aside(update, (state, env_state, key), "update", programs), True
+                update, compiled = program_store.compiled_aside(update, (state, env_state, key), "update", programs), True
             state, env_state, key = update(state, env_state, key)
             step += steps_per_update
             if on_update is not None:
@@ -254,29 +253,6 @@ def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=No
     pmap.assert_is_replicated(state)
     pmap.synchronize_hosts()
     return jax.tree.map(np.asarray, unpmap((state.normalizer_params, state.params.policy, state.params.value)))
-
-
-def compile_aside(fn, args: tuple, name: str, describe):
-    """`fn` (jitted or pmapped) compiled for `args` on a worker thread, while this thread waits in
-    short joins: XLA's compile holds the thread that runs it for up to a minute, and Python
-    answers a signal (train.py's SIGTERM) only between its own bytecodes. The same program as
-    `fn(*args)` would compile, from the same cache; kept in `program_store` as `name` under
-    `describe` unless that is None."""
-    result = {}
-
-    def work():
-        try:
-            result["compiled"] = program_store.compiled(fn, args, name, describe)
-        except Exception as e:  # noqa: BLE001 - raised again on the caller's thread
-            result["error"] = e
-
-    worker = threading.Thread(target=work, daemon=True)  # daemon: a stop during the compile does not wait for it
-    worker.start()
-    while worker.is_alive():
-        worker.join(0.1)
-    if "error" in result:
-        raise result["error"]
-    return result["compiled"]
 
 
 def make_optimizer(settings: PPOSettings):

@@ -143,3 +143,26 @@ def _count_cache_hits(event: str, **_) -> None:
 @functools.cache
 def _listen_for_cache_hits() -> None:
     jax.monitoring.register_event_listener(_count_cache_hits)
+
+
+def compiled_aside(fn, args: tuple, name: str, describe):
+    """`fn` (jitted or pmapped) compiled for `args` on a worker thread, while this thread waits in
+    short joins: XLA's compile holds the thread that runs it for up to a minute, and Python
+    answers a signal (train.py's SIGTERM) only between its own bytecodes. The same program as
+    `fn(*args)` would compile, from the same cache; kept as `name` under `describe` unless that is
+    None."""
+    result = {}
+
+    def work():
+        try:
+            result["compiled"] = compiled(fn, args, name, describe)
+        except Exception as e:  # noqa: BLE001 - raised again on the caller's thread
+            result["error"] = e
+
+    worker = threading.Thread(target=work, daemon=True)  # daemon: a stop during the compile does not wait for it
+    worker.start()
+    while worker.is_alive():
+        worker.join(0.1)
+    if "error" in result:
+        raise result["error"]
+    return result["compiled"]
