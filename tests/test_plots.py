@@ -51,3 +51,18 @@ def test_scheduled_leg_failure_runs_get_one_line_per_leg(tmp_path):
     run.mkdir()
     (run / "metrics.jsonl").write_text("\n".join(json.dumps(r) for r in rows) + "\n")
     assert mpimg.imread(plots.plot_runs([run], tmp_path / "c.png")).std() > 0.01
+
+
+def test_velocity_runs_get_tracking_panels_instead_of_goals(tmp_path):
+    rows = [{"step": s, "final_distance": 1.0, "success_rate": 0.0, "goal_bonus": 5e4, "goals_per_episode": 0.0,
+             "episode_return": 8e3, "episode_length": 990.0, "fall_rate": 0.1, "curriculum/level_mean": s / 1e6,
+             "eval/episode_reward/tracking_lin_vel": 6e3, "eval/episode_reward/tracking_ang_vel": 2e3}
+            for s in (0, 1e6)]
+    keys = [key for key, _ in plots.panels_for(rows)]
+    assert keys[:2] == ["eval/episode_reward/tracking_lin_vel", "eval/episode_reward/tracking_ang_vel"]
+    assert not {"final_distance", "success_rate", "goal_bonus"} & set(keys)
+    assert keys[-2:] == ["fall_rate", "curriculum/level_mean"]
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "metrics.jsonl").write_text("\n".join(json.dumps(r) for r in rows) + "\n")
+    assert mpimg.imread(plots.plot_runs([run], tmp_path / "c.png")).std() > 0.01

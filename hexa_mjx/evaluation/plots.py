@@ -21,6 +21,10 @@ from pathlib import Path
 LEG_P = "leg_failure/p_leg"  # metrics.jsonl's key prefix of each leg's chance of failing (hexa_mjx.mdp.failure_schedule)
 PANELS = [("final_distance", "distance to goal at episode end (m)"), ("success_rate", "success rate"),
           ("episode_return", "episodic return"), ("goal_bonus", "goal bonus per episode")]
+TRACKING = "eval/episode_reward/tracking_"  # the velocity task's tracking terms, weighted, per evaluation episode
+VELOCITY_PANELS = [(TRACKING + "lin_vel", "planar tracking reward per episode"),
+                   (TRACKING + "ang_vel", "yaw-rate tracking reward per episode"),
+                   ("episode_return", "episodic return"), ("episode_length", "episode length (control steps)")]
 
 
 def read_metrics(run_dir: Path) -> list[dict]:
@@ -31,9 +35,10 @@ def read_metrics(run_dir: Path) -> list[dict]:
 
 
 def panels_for(rows: list[dict]) -> list[tuple[str, str]]:
-    """The (metric, label) panels that suit a run: goals per episode instead of the bonus for
-    navigation, and the mean curriculum level when the run had a curriculum."""
-    panels = list(PANELS)
+    """The (metric, label) panels that suit a run: the tracking terms for velocity commands, which
+    have no goal; goals per episode instead of the bonus for navigation; the mean curriculum level
+    when the run had a curriculum."""
+    panels = list(VELOCITY_PANELS if any(TRACKING + "lin_vel" in r for r in rows) else PANELS)
     if any(r.get("goals_per_episode", 0) > 0 for r in rows):
         panels[3] = ("goals_per_episode", "goals reached per episode")
     falls = ("fall_rate", "falls (share of evaluation episodes)")
@@ -77,7 +82,8 @@ def plot_runs(run_dirs: list[Path], out: Path, title: str = "") -> Path:
             ax.grid(alpha=0.3)
     for ax in axes.flat[len(panels):]:
         ax.remove()
-    axes.flat[0].axhline(0.5, color="grey", ls="--", lw=1)  # success radius
+    if panels[0][0] == "final_distance":
+        axes.flat[0].axhline(0.5, color="grey", ls="--", lw=1)  # success radius
     axes.flat[0].legend(fontsize=8)
     if title:
         fig.suptitle(title)
