@@ -38,9 +38,12 @@ def panels_for(rows: list[dict]) -> list[tuple[str, str]]:
     """The (metric, label) panels that suit a run: the tracking terms for velocity commands, which
     have no goal; goals per episode instead of the bonus for navigation; the mean curriculum level
     when the run had a curriculum."""
-    panels = list(VELOCITY_PANELS if any(TRACKING + "lin_vel" in r for r in rows) else PANELS)
-    if any(r.get("goals_per_episode", 0) > 0 for r in rows):
-        panels[3] = ("goals_per_episode", "goals reached per episode")
+    if any(TRACKING + "lin_vel" in r for r in rows):
+        panels = list(VELOCITY_PANELS)
+    else:
+        panels = list(PANELS)
+        if any(r.get("goals_per_episode", 0) > 0 for r in rows):
+            panels[3] = ("goals_per_episode", "goals reached per episode")
     falls = ("fall_rate", "falls (share of evaluation episodes)")
     if any("curriculum/level_mean" in r for r in rows):
         panels += [falls, ("curriculum/level_mean", "mean curriculum level (0: easiest)")]
