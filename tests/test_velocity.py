@@ -140,6 +140,26 @@ def test_tracking_figures_of_a_known_rollout():
     assert summary["stand_drift"]["speed_mean"] == pytest.approx(0.05, rel=0.03)
 
 
+def test_falls_are_put_on_the_command_in_force():
+    dt, steps = 1 / 50, 300
+    command = np.zeros((steps, 3, 4))
+    command[:100, :, 0] = 0.4  # forward for 2 s, then sideways
+    command[100:, :, 1] = -0.3
+    alive = np.ones((steps, 3))
+    alive[130:, 0] = 0.0  # falls 0.58 s into the sideways command (its last step, 129)
+    alive[60:, 2] = 0.0  # falls 1.18 s into the forward command
+    traj = {"command": command, "commanded": command[..., :3], "velocity": command[..., :3],
+            "qpos": np.tile(np.array([0, 0, 0.1, 1, 0, 0, 0.0]), (steps, 3, 1))}
+    task = type("T", (), {"robot": None})()
+    summary, _ = tracking.tracking_summary(task, dt, traj, alive, np.array([True, False, True]))
+    falls = summary["falls"]
+    assert falls["falls"] == 2 and falls["by_class"] == {"forward": 1, "sideways": 1}
+    assert [f["seconds_into_command"] for f in falls["each"]] == pytest.approx([0.58, 1.18])
+    assert falls["each"][0]["commanded"] == pytest.approx([0.0, -0.3, 0.0])
+    assert falls["within_settle"] == 1
+    assert any(label == "falls by the command in force" for label, _ in tracking.table_rows({"tracking": summary}))
+
+
 def test_progress_line_divides_the_run_own_reward_scales_back():
     # a run trained with --reward_scale tracking_ang_vel=10 logs the term scaled by 10, not by the table's 5
     row = {"episode_length": 100, "eval/episode_reward/tracking_lin_vel": 0.5 * 20 * 100,

@@ -177,7 +177,8 @@ def tracking(env: NativeEnv, episodes: list[dict]) -> dict:
             traj[k][:n, i] = e["trajectory"][k]
         traj["qpos"][:n, i] = e["trajectory"]["qpos"][1:]
         alive[:n, i] = 1.0
-    summary, _ = figures.tracking_summary(env.task, env.dt, traj, alive, None)
+    fell = np.array([e["fell"] for e in episodes], bool)
+    summary, _ = figures.tracking_summary(env.task, env.dt, traj, alive, fell)
     return summary
 
 

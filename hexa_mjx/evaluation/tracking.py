@@ -17,6 +17,8 @@ Definitions (docs/EVALUATION.md):
   over its time.
 - Speed bands: every settled command whose yaw rate is zero, analysed as one gait window
   (hexa_mjx.evaluation.gait), grouped by its commanded planar speed.
+- Falls by command: each fallen episode's command at its last step, its class, and how long that
+  command had been in force (a fall within SETTLE_S of a change is a fall in the change).
 """
 
 from __future__ import annotations
@@ -42,15 +44,36 @@ def command_class(command: np.ndarray, classes) -> np.ndarray:
     return np.vectorize(order.get)(name)
 
 
+def command_age(command: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(control steps since each step's command came into force, segment id of each step within
+    its episode), both (time, episodes)."""
+    changed = np.concatenate([np.ones((1, command.shape[1]), bool),
+                              np.any(command[1:] != command[:-1], axis=-1)], axis=0)
+    t = np.arange(len(command))[:, None]
+    return t - np.maximum.accumulate(np.where(changed, t, 0), axis=0), np.cumsum(changed, axis=0) - 1
+
+
 def settled_steps(command: np.ndarray, alive: np.ndarray, dt: float):
     """(whether each step is at least SETTLE_S past its command's start and alive, segment id of
     each step within its episode)."""
-    changed = np.concatenate([np.ones((1, command.shape[1]), bool),
-                              np.any(command[1:] != command[:-1], axis=-1)], axis=0)
-    segment = np.cumsum(changed, axis=0) - 1
-    t = np.arange(len(command))[:, None]
-    start = np.maximum.accumulate(np.where(changed, t, 0), axis=0)
-    return (t - start >= round(SETTLE_S / dt)) & (alive > 0), segment
+    age, segment = command_age(command)
+    return (age >= round(SETTLE_S / dt)) & (alive > 0), segment
+
+
+def falls_by_command(command, commanded, alive, fell, dt: float, names) -> dict:
+    """Each fallen episode's command at its last step: counts by class, and per fall its class,
+    the seconds that command had been in force and the (vx, vy, yaw rate) it asked for."""
+    fell = np.asarray(fell, bool)
+    last = np.maximum(alive.sum(0).astype(int) - 1, 0)
+    age, _ = command_age(command)
+    falls = []
+    for i in np.flatnonzero(fell):
+        t = last[i]
+        falls.append({"class": names[command_class(command[t, i], names[:-1])], "seconds_into_command":
+                      round(float(age[t, i] * dt), 3), "commanded": [round(float(v), 3) for v in commanded[t, i]]})
+    by_class = {name: sum(f["class"] == name for f in falls) for name in names}
+    return {"episodes": int(fell.size), "falls": len(falls), "by_class": {k: v for k, v in by_class.items() if v},
+            "within_settle": sum(f["seconds_into_command"] < SETTLE_S for f in falls), "each": falls}
 
 
 def averaged(values: np.ndarray, steps: int) -> np.ndarray:
@@ -122,6 +145,7 @@ def tracking_summary(task, dt: float, traj: dict, alive: np.ndarray, fell) -> tu
         "stand_drift": {"commands": len(drift), "speed_mean": float(drift[:, 0].mean()) if len(drift) else None,
                         "speed_p95": float(np.percentile(drift[:, 0], 95)) if len(drift) else None,
                         "yaw_rate_mean": float(drift[:, 1].mean()) if len(drift) else None},
+        "falls": None if fell is None else falls_by_command(command, commanded, alive, fell, dt, names),
         "speed_bands": [_band(SPEED_BANDS[b], SPEED_BANDS[b + 1], records) for b, records in bands.items() if records],
     }
     per_episode = {"velocity_rms": [_errors(commanded[:, i], velocity[:, i], settled[:, i]).get("velocity_rms")
@@ -160,6 +184,11 @@ def table_rows(summary: dict) -> list[tuple[str, str]]:
     if d["commands"]:
         rows.append(("drift commanded to stand: mean (95th pct), yaw",
                      f"{d['speed_mean']:.3f} ({d['speed_p95']:.3f}) m/s, {d['yaw_rate_mean']:.3f} rad/s"))
+    f = t.get("falls")
+    if f and f["falls"]:
+        classes = ", ".join(f"{name} {n}" for name, n in f["by_class"].items())
+        rows.append(("falls by the command in force", f"{classes}; {f['within_settle']} within {t['settle_s']} s "
+                     "of a change"))
     for b in t["speed_bands"]:
         cot = "-" if b["cost_of_transport_median"] is None else f"{b['cost_of_transport_median']:.2f}"
         duty = "-" if b["duty_factor"] is None else f"{b['duty_factor']:.2f}"
