@@ -60,17 +60,18 @@ def settled_steps(command: np.ndarray, alive: np.ndarray, dt: float):
     return (age >= round(SETTLE_S / dt)) & (alive > 0), segment
 
 
-def falls_by_command(command, commanded, alive, fell, dt: float, names) -> dict:
-    """Each fallen episode's command at its last step: counts by class, and per fall its class,
-    the seconds that command had been in force and the (vx, vy, yaw rate) it asked for."""
+def falls_by_command(command, classes, commanded, alive, fell, dt: float, names) -> dict:
+    """Each fallen episode's command at its last step: counts by class, and per fall its class
+    (`classes`: each step's index in `names`), the seconds that command had been in force and the
+    (vx, vy, yaw rate) it asked for."""
     fell = np.asarray(fell, bool)
     last = np.maximum(alive.sum(0).astype(int) - 1, 0)
     age, _ = command_age(command)
     falls = []
     for i in np.flatnonzero(fell):
         t = last[i]
-        falls.append({"class": names[command_class(command[t, i], names[:-1])], "seconds_into_command":
-                      round(float(age[t, i] * dt), 3), "commanded": [round(float(v), 3) for v in commanded[t, i]]})
+        falls.append({"class": names[classes[t, i]], "seconds_into_command": round(float(age[t, i] * dt), 3),
+                      "commanded": [round(float(v), 3) for v in commanded[t, i]]})
     by_class = {name: sum(f["class"] == name for f in falls) for name in names}
     return {"episodes": int(fell.size), "falls": len(falls), "by_class": {k: v for k, v in by_class.items() if v},
             "within_settle": sum(f["seconds_into_command"] < SETTLE_S for f in falls), "each": falls}
@@ -145,7 +146,7 @@ def tracking_summary(task, dt: float, traj: dict, alive: np.ndarray, fell) -> tu
         "stand_drift": {"commands": len(drift), "speed_mean": float(drift[:, 0].mean()) if len(drift) else None,
                         "speed_p95": float(np.percentile(drift[:, 0], 95)) if len(drift) else None,
                         "yaw_rate_mean": float(drift[:, 1].mean()) if len(drift) else None},
-        "falls": None if fell is None else falls_by_command(command, commanded, alive, fell, dt, names),
+        "falls": None if fell is None else falls_by_command(command, classes, commanded, alive, fell, dt, names),
         "speed_bands": [_band(SPEED_BANDS[b], SPEED_BANDS[b + 1], records) for b, records in bands.items() if records],
     }
     per_episode = {"velocity_rms": [_errors(commanded[:, i], velocity[:, i], settled[:, i]).get("velocity_rms")
