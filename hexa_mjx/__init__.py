@@ -1,6 +1,8 @@
 """hexa_mjx: a JAX-native, massively parallel hexapod trainer on MuJoCo MJX."""
 
 import ctypes.util
+import importlib.machinery
+import importlib.util
 import os
 import sys
 
@@ -39,8 +41,6 @@ class _MovedFinder:
 
     @staticmethod
     def find_spec(fullname, path=None, target=None):
-        import importlib.util
-
         package, _, name = fullname.rpartition(".")
         if package != __name__ or name not in MOVED:
             return None
@@ -61,8 +61,8 @@ class _QuietWarpFinder:
     NOISE = ("Failed to import warp:", "Failed to import mujoco_warp:")
 
     def find_spec(self, fullname, path=None, target=None):
-        import importlib.machinery
-
+        # importlib.machinery is imported at the top: importing it here, on Python 3.12, would call
+        # this finder again before it returns, without end.
         if fullname != self.NAME:
             return None
         spec = importlib.machinery.PathFinder.find_spec(fullname, path)
