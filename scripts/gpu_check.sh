@@ -32,7 +32,9 @@ if ls .whl/*.whl >/dev/null 2>&1; then
   "$PY" -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl \
     && export PYTHONPATH=/tmp/site
 fi
-export PYTHONPATH="$PWD${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1 MUJOCO_GL=${MUJOCO_GL:-egl}
+# MUJOCO_GL is left to hexa_mjx (EGL or OSMesa where the library is there): nothing here renders,
+# and forcing EGL on an image without libEGL stops MuJoCo's import.
+export PYTHONPATH="$PWD${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1
 start=$(date +%s)
 stamp() { echo "== $1 ($(( $(date +%s) - start )) s after the start)"; }
 
