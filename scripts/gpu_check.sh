@@ -2,8 +2,9 @@
 # Everything a lent GPU machine is asked, in one go (docs/TRAINING.md, "On a GPU"): the machine's
 # facts, a short training of the fast preset at GPU batch sizes, the environment benchmark at 1,024
 # to 8,192 environments on flat ground and on mixed and hard terrain, a short training of the
-# velocity recipe, and MJX's Warp implementation's physics speed where it imports. Each part has its own time limit and a
-# failed part does not stop the next; every figure lands in OUT as a few flat text files.
+# velocity recipe, and MJX's Warp implementation's physics speed where it imports. Each part has
+# its own time limit and a failed part does not stop the next; every figure lands in OUT as a few
+# flat text files.
 #
 #   bash scripts/gpu_check.sh [OUT]        # OUT: default runs/gpu_check
 #   GPU_CHECK_QUICK=1 bash scripts/gpu_check.sh /tmp/gpu_check   # tiny sizes: checks the script on a CPU
