@@ -22,8 +22,8 @@ if [ "$QUICK" = 1 ]; then
   # One CPU device: XLA:CPU in jax 0.11 (a GPU image's) crashes compiling PPO's pmap over two.
   EXTRA=(--num_evals 2 --num_eval_envs 4 --episode_length 50 --cpu_devices 1)
 else
-  # Limits sized so that every part fits in one 8-minute call (a lent machine has 15 minutes in
-  # all, its start included): the fast preset 150 s, the benchmark 170 s, the velocity recipe
+  # Limits sized so that every part fits in 8 minutes (a GPU machine booked for 15 minutes, its
+  # start included): the fast preset 150 s, the benchmark 170 s, the velocity recipe
   # 120 s, Warp 45 s.
   BATCHES="1024 4096 8192"; STEPS=100; ENVS=4096; BATCH=256; MINIBATCHES=32; TRAIN_STEPS=30000000; LIMIT=150
   EXTRA=(--num_evals 15)
