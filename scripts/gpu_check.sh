@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Everything a lent GPU machine is asked, in one go (docs/TRAINING.md, "On a GPU"): the machine's
+# Everything a GPU machine is asked, in one go (docs/TRAINING.md, "On a GPU"): the machine's
 # facts, a short training of the fast preset at GPU batch sizes, the environment benchmark at 1,024
 # to 8,192 environments on flat ground and on mixed and hard terrain, a short training of the
 # velocity recipe, and MJX's Warp implementation's physics speed where it imports. Each part has

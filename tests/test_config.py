@@ -155,6 +155,17 @@ def test_commands_of_earlier_versions_still_run(old, new):
     assert proc.returncode == 0 and f"python -m hexa_mjx.{new}" in proc.stdout, proc.stderr
 
 
+def test_import_hooks_import_nothing_while_finding():
+    # Python 3.12 starts without importlib.machinery loaded: a finder that imports it while finding
+    # a module is asked to find it again, without end. Dropping it here makes 3.11 do the same.
+    code = ("import sys, hexa_mjx\n"
+            "for name in ('importlib.machinery', 'importlib.util'): sys.modules.pop(name, None)\n"
+            "import json.tool\n"
+            "print('imported')")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert proc.returncode == 0 and "imported" in proc.stdout, proc.stderr[-2000:]
+
+
 def test_init_from_takes_another_tasks_policy_that_observes_as_many_values(tmp_path, capsys):
     from hexa_mjx.robot import constants as robot
     from hexa_mjx.training import config as train_config
