@@ -160,6 +160,18 @@ def test_falls_are_put_on_the_command_in_force():
     assert any(label == "falls by the command in force" for label, _ in tracking.table_rows({"tracking": summary}))
 
 
+def test_episodes_shorter_than_the_settling_window_get_a_table_not_a_crash():
+    dt, steps = 1 / 50, 40  # 0.8 s: every step is within the first second of its command
+    command = np.zeros((steps, 2, 4))
+    command[..., 0] = 0.3
+    traj = {"command": command, "commanded": command[..., :3], "velocity": command[..., :3],
+            "qpos": np.tile(np.array([0, 0, 0.1, 1, 0, 0, 0.0]), (steps, 2, 1))}
+    summary, _ = tracking.tracking_summary(type("T", (), {"robot": None})(), dt, traj, np.ones((steps, 2)), None)
+    assert summary["steps"] == 0
+    (label, text), = tracking.table_rows({"tracking": summary})
+    assert "--episode_length" in text
+
+
 def test_progress_line_divides_the_run_own_reward_scales_back():
     # a run trained with --reward_scale tracking_ang_vel=10 logs the term scaled by 10, not by the table's 5
     row = {"episode_length": 100, "eval/episode_reward/tracking_lin_vel": 0.5 * 20 * 100,

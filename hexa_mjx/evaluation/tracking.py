@@ -173,6 +173,9 @@ def table_rows(summary: dict) -> list[tuple[str, str]]:
     """eval.py's table rows of the tracking figures."""
     t = summary["tracking"]
     pct = lambda x: "-" if x is None else f"{x:.0%}"  # noqa: E731
+    if not t["steps"]:  # every command changed (or the episode ended) within the settling window
+        return [("velocity and yaw-rate RMS errors", f"none: no step came {t['settle_s']} s after a command "
+                 "change; use longer episodes (--episode_length)")]
     rows = [(f"velocity RMS error ({t['average_s']} s average; instantaneous)",
              f"{t['velocity_rms']:.3f} m/s ({t['velocity_rms_instant']:.3f})"),
             ("yaw-rate RMS error (average; instantaneous)", f"{t['yaw_rate_rms']:.3f} rad/s ({t['yaw_rate_rms_instant']:.3f})"),
