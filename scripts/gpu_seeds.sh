@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # Several seeds of one recipe at the GPU shape (4,096 environments, batch 256 x 32), trained side
 # by side on one GPU, each in its own process with a fifth of the GPU's memory (docs/TRAINING.md,
-# "On a GPU"). What comes back to OUT is small: each run's config.json, metrics.jsonl, console and
-# every checkpoint's params with their step.json (no optimizer or resume state), enough for eval.py, export and
-# `RUN/best` once the folder is copied out.
+# "On a GPU"). What lands in OUT is small: per run an archive OUT/RECIPE-sSEED.tgz of its
+# config.json, metrics.jsonl and every checkpoint's params with their step.json (no optimizer or
+# resume state), enough for eval.py, export and `RUN/best` once unpacked (tar xzf ... -C runs/),
+# and its console in OUT/train_sSEED.txt.
 #
 #   bash scripts/gpu_seeds.sh OUT RECIPE SECONDS SEED [SEED ...]
 #   RESUME=1 bash scripts/gpu_seeds.sh ...      # continue runs a time limit stopped, on the same machine
@@ -63,4 +64,8 @@ for k in ('optimizer_sha256', 'resume', 'resume_sha256'): m.pop(k, None)
 json.dump(m, open(sys.argv[2], 'w'))" "$ckpt/step.json" "$dest/checkpoints/$(basename "$ckpt")/step.json"
   done
 done
-du -sh "$OUT" >> "$OUT/facts.txt"
+# One archive per run: a few files to copy off the machine, not a few hundred in deep folders.
+for seed in "$@"; do
+  tar czf "$OUT/$RECIPE-s$seed.tgz" -C "$OUT" "$RECIPE-s$seed" && rm -r "${OUT:?}/$RECIPE-s$seed"
+done
+du -sh "$OUT"/*.tgz >> "$OUT/facts.txt"

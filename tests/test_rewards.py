@@ -66,6 +66,25 @@ def test_low_duty_is_each_working_feet_shortfall_below_the_minimum_share():
     assert float(rewards.low_duty(share, jp.asarray([1.0, 1.0, 1.0, 1.0, 0.0, 1.0]))) == pytest.approx(1.5)
 
 
+def test_feet_air_time_pays_each_touchdown_for_its_swing_within_the_window():
+    lo, hi = rewards.AIR_TIME_MIN, rewards.AIR_TIME_MAX
+    swing = jp.asarray([0.0, lo, lo + 0.1, hi + 1.0, 0.05, 0.0])  # legs 1 and 6 did not touch down now
+    expected = 0.0 + 0.0 + 0.1 + (hi - lo) + (0.05 - lo)
+    assert float(rewards.feet_air_time(swing, jp.ones(6))) == pytest.approx(expected)
+    failed_leg_4 = jp.asarray([1.0, 1.0, 1.0, 0.0, 1.0, 1.0])
+    assert float(rewards.feet_air_time(swing, failed_leg_4)) == pytest.approx(expected - (hi - lo))
+    assert float(rewards.feet_air_time(swing, jp.ones(6), moving=0.0)) == 0.0  # standing still: no term
+
+
+def test_foot_slip_is_the_squared_speed_of_the_feet_on_the_floor():
+    speed = jp.asarray([0.1, 0.2, 0.0, 1.0, 0.3, 0.0])
+    stance = jp.asarray([1.0, 1.0, 1.0, 0.0, 1.0, 0.0])  # leg 4 swings: its speed does not count
+    assert float(rewards.foot_slip(speed, stance)) == pytest.approx(0.01 + 0.04 + 0.09)
+    assert float(rewards.foot_slip(speed, stance, moving=0.0)) == 0.0
+    assert rewards.make_scales(VARIANTS["navigate"])["feet_air_time"] == 0.0  # both off unless asked for
+    assert rewards.make_scales(VARIANTS["navigate"])["foot_slip"] == 0.0
+
+
 def test_running_stance_settles_at_the_share_of_time_down():
     dt, avg = 1 / 60, jp.ones(2)
     for t in range(60 * 20):  # 20 s of a foot down one step in four, and one never down

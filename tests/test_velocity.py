@@ -172,6 +172,28 @@ def test_episodes_shorter_than_the_settling_window_get_a_table_not_a_crash():
     assert "--episode_length" in text
 
 
+def test_gait_terms_in_the_native_engine_follow_the_feet():
+    """feet_air_time and foot_slip, asked for, from the episode's own foot bookkeeping: no slip on
+    an episode's first step (its previous foot positions are not this episode's), touchdowns paid
+    while walking, and the slip equal to the feet's measured planar speed on the floor."""
+    env = NativeEnv(make_config("velocity", reward_scales={"feet_air_time": 1.0, "foot_slip": -1.0}))
+    env.reset(seed=0)
+    env.set_command(np.array([0.4, 0.0, 0.0, 0.0]))  # walk forward: the terms count
+    rng, slips, touchdowns = np.random.default_rng(0), [], 0
+    for t in range(60):
+        before = env.info["foot_xy"].copy()
+        *_, info = env.step(rng.uniform(-1, 1, env.action_size))
+        slips.append(info["terms"]["foot_slip"])
+        touchdowns += info["terms"]["feet_air_time"] != 0.0
+        if t == 0:
+            assert info["terms"]["foot_slip"] == 0.0
+        else:
+            speed = np.linalg.norm(env.info["foot_xy"] - before, axis=1) / env.dt
+            stance = env.info["air_time"] == 0.0
+            assert info["terms"]["foot_slip"] == pytest.approx(float((stance * speed ** 2).sum()), rel=1e-5)
+    assert touchdowns > 0 and max(slips) > 0.0
+
+
 def test_progress_line_divides_the_run_own_reward_scales_back():
     # a run trained with --reward_scale tracking_ang_vel=10 logs the term scaled by 10, not by the table's 5
     row = {"episode_length": 100, "eval/episode_reward/tracking_lin_vel": 0.5 * 20 * 100,

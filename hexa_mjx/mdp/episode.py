@@ -84,7 +84,9 @@ class Episode:
                 "air_time": xp.zeros(legs),  # s since each foot last touched the floor
                 "stance_avg": xp.ones(legs),  # running share of time on the floor (all down)
                 "latency": events.draw_latency(self.config.action_latency, draws, draws.fold_in(key, 4)),
-                **self._failure_kind(draws, key), **self._walking(xp)}
+                **self._failure_kind(draws, key), **self._walking(xp),
+                # the feet's planar positions after the last step, for foot_slip (first step: unused)
+                **({"foot_xy": xp.zeros((legs, 2))} if "foot_slip" in self.active else {})}
 
     # -- one control step -----------------------------------------------------
 
@@ -92,6 +94,24 @@ class Episode:
         """The policy's observation, with the configured noise."""
         obs = self.observer.observe(qpos, qvel, ctrl, goal, heading, command)
         return events.noisy(obs, self.noise_scale, draws, key) if self.config.obs_noise else obs
+
+    def _gait_inputs(self, info, qpos, command, heading, stance, foot_pos) -> dict:
+        """The gait terms' inputs (rewards.feet_air_time, rewards.foot_slip), when one is active:
+        each foot's swing ending this step (s), stance, planar speed over the control step (m/s; 0
+        on an episode's first step, whose previous position is the last episode's) and whether the
+        command asks to move."""
+        if "feet_air_time" not in self.active and "foot_slip" not in self.active:
+            return {}
+        xp = namespace(qpos)
+        moving = 1.0
+        if self.task.uses_command:
+            moving = (xp.linalg.norm(self.task.commanded(command, qpos, heading)) > rewards.MOVING).astype(xp.float32)
+        out = {"swing": xp.where(stance & (info["air_time"] > 0), info["air_time"], 0.0),
+               "stance": stance.astype(xp.float32), "moving": moving}
+        if "foot_xy" in info:
+            step = xp.linalg.norm(foot_pos[:, :2] - info["foot_xy"], axis=-1) / self.dt
+            out["foot_speed"] = xp.where(info["t"] > 0, step, 0.0)
+        return out
 
     def _walking(self, xp) -> dict:
         """{"asked_m", "walked_m"} of a new episode, when the curriculum measures walking."""
@@ -140,9 +160,10 @@ class Episode:
         bad, non_foot = self.robot.contact_counts(contacts.geom1, contacts.geom2, contacts.dist, contacts.foot_pos,
                                                   cfg.lift_clearance)
         power = servo_power(actuator_force, qvel, self.robot.actuator_dof)
+        gait = self._gait_inputs(info, qpos, command, heading, stance, contacts.foot_pos)
         terms = rewards.terms([name for name in self.active if name in rewards.TERMS], cfg, prev_qpos, qpos, qvel,
                               goal, bad, non_foot, done, completed, power, ground=self.robot.ground(qpos[:2]),
-                              air_time=air_time, working=1.0 - info["failed_legs"], stance_avg=stance_avg)
+                              air_time=air_time, working=1.0 - info["failed_legs"], stance_avg=stance_avg, **gait)
         terms.update(self.task.reward_terms(self.active, prev_qpos, qpos, qvel, goal, heading, command))
         terms = {name: terms[name] for name in self.active}  # the scales' order: the reward sums in it
 
@@ -163,6 +184,8 @@ class Episode:
         success = xp.maximum(info["success"], reached.astype(xp.float32))
         info = {**info, "t": t, "success": success, "goals": goals, "level": level, "air_time": air_time,
                 "stance_avg": stance_avg, **walking}
+        if "foot_xy" in info:
+            info["foot_xy"] = contacts.foot_pos[:, :2]
         figures = {"distance": dist, "success": success, "goals": goals, "fell": fell, "done": done, "over": over,
                    "reached": reached, "completed": completed, "non_foot": non_foot}
         return info, terms, figures, {"goal": next_goal, "heading": heading, "command": command}

@@ -88,6 +88,26 @@ def low_duty(stance_avg, working):
     return (working * (MIN_DUTY - stance_avg).clip(0.0, None) / MIN_DUTY).sum()
 
 
+# Playground's Go1 swing window (0.2 to 0.5 s), scaled by the square root of the leg-length ratio
+# (0.16 m here against about 0.42 m): steps of equal Froude number.
+AIR_TIME_MIN = 0.12  # s: a shorter swing costs, a longer one pays
+AIR_TIME_MAX = 0.3  # s: a longer swing pays no more
+MOVING = 0.1  # norm of the commanded (vx, vy, yaw rate) above which the gait terms count (Playground's)
+
+
+def feet_air_time(swing, working, moving=1.0):
+    """Playground's feet_air_time: summed over working feet that touch down this step, the swing
+    just ended (`swing`, s; 0 for a foot not touching down) less AIR_TIME_MIN, at most
+    AIR_TIME_MAX - AIR_TIME_MIN; only while `moving` (commanded to walk or turn)."""
+    return moving * (working * (swing > 0) * (swing - AIR_TIME_MIN).clip(None, AIR_TIME_MAX - AIR_TIME_MIN)).sum()
+
+
+def foot_slip(foot_speed, stance, moving=1.0):
+    """Playground's feet_slip: summed over feet on the floor (`stance`, 0/1), the square of each
+    one's planar speed (`foot_speed`, m/s), (m/s)^2; only while `moving`."""
+    return moving * (stance * foot_speed * foot_speed).sum()
+
+
 def termination(flipped):
     """1 on the step the episode ends by a fall (or a non-finite physics state)."""
     return flipped.astype("float32")
@@ -106,15 +126,18 @@ def forward_velocity(vel_xy):
 TERMS = {
     f.__name__: f
     for f in (goal_approach, goal_reached, velocity_alignment, goal_bonus, stability, height, energy, mechanical_power,
-              contact_quality, body_contact, idle_feet, low_duty, termination, forward_progress, forward_velocity)
+              contact_quality, body_contact, idle_feet, low_duty, feet_air_time, foot_slip, termination,
+              forward_progress, forward_velocity)
 }
 
 def terms(names, config, prev_qpos, qpos, qvel, goal_xy, bad_contacts, non_foot_contacts, done, completed,
-          power, ground=0.0, air_time=0.0, working=1.0, stance_avg=1.0) -> dict:
+          power, ground=0.0, air_time=0.0, working=1.0, stance_avg=1.0, swing=0.0, stance=0.0, foot_speed=0.0,
+          moving=1.0) -> dict:
     """Unscaled values of the terms `names` for the transition prev_qpos -> (qpos, qvel), with
     `goal_xy` the step's goal, contact counts and servo power (W) of the new state, `ground` the
     terrain's height (m) under the torso, each foot's `air_time` (s), running share of time on the
-    floor `stance_avg` and whether its leg is `working` (0/1), and `config` an EnvConfig.
+    floor `stance_avg`, swing ending now (s), `stance` (0/1), planar `foot_speed` (m/s) and whether
+    its leg is `working` (0/1), whether the command asks to move (`moving`, 0/1), and `config` an EnvConfig.
     Either engine's arrays; under jit, XLA drops the inputs no named term uses."""
     xp = namespace(qpos)
     xy, prev_xy, vel_xy = qpos[:2], prev_qpos[:2], qvel[:2]
@@ -136,6 +159,8 @@ def terms(names, config, prev_qpos, qpos, qvel, goal_xy, bad_contacts, non_foot_
         "body_contact": (non_foot_contacts,),
         "idle_feet": (air_time, working),
         "low_duty": (stance_avg, working),
+        "feet_air_time": (swing, working, moving),
+        "foot_slip": (foot_speed, stance, moving),
         "termination": (done,),
         "forward_progress": (prev_xy, xy),
         "forward_velocity": (vel_xy,),
@@ -158,6 +183,8 @@ SHAPING = {
     "body_contact": -1.0,
     "idle_feet": 0.0,  # off unless asked for (--reward_scale idle_feet=-5): a stance for every working leg
     "low_duty": 0.0,  # off unless asked for (--reward_scale low_duty=-5): load on every working leg
+    "feet_air_time": 0.0,  # off unless asked for (Playground's Go1: 0.1 x its tracking weight, here 1)
+    "foot_slip": 0.0,  # off unless asked for (Playground's Go1: -0.1 x its tracking weight, here -1)
     "termination": -200.0,  # the report's code: -200 for a flip
 }
 
