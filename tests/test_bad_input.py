@@ -65,7 +65,6 @@ TRAIN_CASES = [
     (["--task", "navigate", "--reward", "goal_directed"], "not one of the navigate task's"),
     (["--task", "navigate", "--goal_min_distance", "3", "--goal_max_distance", "1"], "0 <= min <= max"),
     (["--curriculum_levels", "4"], "the goal task has none"),
-    (["--task", "velocity", "--curriculum_levels", "4"], "grade the terrain"),
     (["--task", "navigate", "--curriculum_levels", "-1"], "curriculum_levels is a whole number of levels"),
     (["--start_yaw_noise", "-1"], "start_yaw_noise is a range in radians from 0 to pi"),
     (["--leg_failure_rate", "2"], "leg_failure_rate is a probability in [0, 1]"),

@@ -1,4 +1,4 @@
-"""The curriculum: the level rules (navigation's goals, the velocity task's terrain), goal ranges
+"""The curriculum: the level rules (navigation's goals, the velocity task's terrain or commands), goal ranges
 per level, levels kept across episodes and reported to the host."""
 
 import jax
@@ -42,8 +42,21 @@ def test_velocity_levels_move_by_the_commanded_path_walked():
     assert _next_level(task, 2, over=True, asked=5.0, walked=0.1) == 1  # stood still: down
     assert _next_level(task, 2, over=True, fell=True, asked=5.0, walked=4.5) == 1  # a fall: down
     assert _next_level(task, 2, asked=5.0, walked=4.5) == 2  # mid-episode: kept
-    with pytest.raises(ValueError, match="grade the terrain"):
-        hexa_mjx.make_env(task="velocity", curriculum_levels=LEVELS)  # flat ground has nothing to grade
+
+
+@pytest.mark.parametrize("terrain, shares", [("flat", [0.25, 0.5, 0.75, 1.0]), ("bumps", [1.0] * LEVELS)])
+def test_velocity_command_ranges_open_with_the_level_on_flat_ground_only(terrain, shares):
+    """On flat ground the levels grade the commands (legged_gym's command curriculum): level l
+    draws from (l + 1) / N of each range; on a terrain they grade the ground and every command is
+    drawn from the full ranges; without a curriculum, the draw is the task's as before."""
+    cfg = EnvConfig(task="velocity", terrain=terrain, curriculum_levels=LEVELS, command_zero_share=0.0)
+    task, plain = VelocityTask(cfg, robot=None), VelocityTask(EnvConfig(task="velocity", command_zero_share=0.0), None)
+    keys = jax.random.split(jax.random.PRNGKey(1), 400)
+    draw = jax.jit(jax.vmap(lambda key, lvl: task.draw_command(DRAWS, key, lvl)[0], in_axes=(0, None)))
+    full = np.asarray(jax.vmap(lambda key: plain.draw_command(DRAWS, key)[0])(keys))
+    for level, share in enumerate(shares):
+        np.testing.assert_allclose(np.asarray(draw(keys, jp.int32(level)))[:, :3], full[:, :3] * share, rtol=1e-5, atol=1e-6)
+    assert np.abs(full[:, 0]).max() > 0.5  # the full draw reaches past a quarter of the ranges
 
 
 def test_velocity_episodes_sum_the_path_asked_for_and_walked():

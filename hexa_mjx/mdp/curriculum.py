@@ -8,9 +8,11 @@ distances from the range's start up to that fraction of the way to its end. Leve
 full task. Each goal reached moves the environment up one level; an episode that ends in a fall,
 or without reaching any goal, moves it down one. Every environment starts at level 0.
 
-The velocity task has no goals: on a terrain its level grades the ground only, and moves by the
-commanded path walked, as legged_gym's: up one for an episode that lasts its full length and
-walks at least half of it, down one for a fall or less than a quarter (`VelocityTask.level_moves`).
+The velocity task has no goals: on a terrain its level grades the ground only; on flat ground it
+opens a share (l + 1) / N of each command range about zero (legged_gym's command curriculum). Its
+level moves by the commanded path walked, as legged_gym's terrain curriculum: up one for an
+episode that lasts its full length and walks at least half of it, down one for a fall or less
+than a quarter (`VelocityTask.level_moves`).
 Each task says how its levels move (`Task.level_moves`).
 
 Evaluation always uses the full ranges: the curriculum is a setting of the training environment

@@ -180,7 +180,7 @@ class Episode:
         # A new goal is drawn only on the step that completes one (native MuJoCo draws nothing else).
         next_goal = draws.select(completed, lambda: self.task.next_goal(qpos, goal, goals, draws, key, level),
                                  lambda: goal)
-        command, heading = self.task.next_command(t, command, heading, draws, draws.fold_in(key, 8))
+        command, heading = self.task.next_command(t, command, heading, draws, draws.fold_in(key, 8), level)
         success = xp.maximum(info["success"], reached.astype(xp.float32))
         info = {**info, "t": t, "success": success, "goals": goals, "level": level, "air_time": air_time,
                 "stance_avg": stance_avg, **walking}

@@ -42,7 +42,7 @@ class Task:
         """Raise ValueError for settings this task cannot run (before anything is built)."""
         if config.curriculum_levels:
             raise ValueError(f"curriculum_levels grades the navigate task's random goals and the velocity task's "
-                             f"terrain; the {cls.name} task has none: leave it at 0")
+                             f"terrain or commands; the {cls.name} task has none: leave it at 0")
 
     # -- the episode ----------------------------------------------------------
 
@@ -86,9 +86,9 @@ class Task:
         """(command, heading) of a new episode, for tasks with `uses_command`."""
         return None, None
 
-    def next_command(self, t, command, heading, draws, key):
+    def next_command(self, t, command, heading, draws, key, level=0):
         """(command, heading) after control step `t` of the episode: a task with `uses_command`
-        replaces them on its schedule."""
+        replaces them on its schedule (`level`: the environment's curriculum level)."""
         return command, heading
 
     def reward_terms(self, names, prev_qpos, qpos, qvel, goal, heading, command) -> dict:

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hexa_mjx.mdp import observations, rewards
+from hexa_mjx.mdp import curriculum, observations, rewards
 from hexa_mjx.mdp.config import EnvConfig
 from hexa_mjx.robot.kinematics import namespace, rotate, to_heading_frame, yaw
 from hexa_mjx.tasks.base import Task
@@ -79,9 +79,16 @@ class VelocityTask(Task):
 
     @classmethod
     def check(cls, config) -> None:
-        if config.curriculum_levels and config.terrain == "flat":
-            raise ValueError("the velocity task's curriculum_levels grade the terrain (its commands keep their "
-                             "ranges); choose a --terrain, or leave it at 0 on flat ground")
+        pass  # curriculum_levels grade the terrain, or on flat ground the commands (command_share)
+
+    def command_share(self, level):
+        """The share of each command range open at curriculum `level`: on flat ground with
+        curriculum_levels N, (level + 1) / N (legged_gym's command curriculum, on this task's
+        walking rule); 1 on a terrain, whose levels grade the ground, and without a curriculum."""
+        cfg = self.config
+        if not cfg.curriculum_levels or cfg.terrain != "flat":
+            return None
+        return curriculum.range_fraction(level, cfg.curriculum_levels)
 
     def level_moves(self, completed, over, fell, goals, walking):
         """legged_gym's rule on distances: up for an episode that ran its full length and walked at
@@ -117,13 +124,14 @@ class VelocityTask(Task):
     def first_command(self, qpos, draws, key):
         return self.draw_command(draws, key)
 
-    def next_command(self, t, command, heading, draws, key):
-        return draws.select(t % self.interval_steps == 0, lambda: self.draw_command(draws, key),
+    def next_command(self, t, command, heading, draws, key, level=0):
+        return draws.select(t % self.interval_steps == 0, lambda: self.draw_command(draws, key, level),
                             lambda: (command, heading))
 
-    def draw_command(self, draws, key):
+    def draw_command(self, draws, key, level=0):
         """A command of a class drawn with `command_zero_share` for "zero" and the rest shared
-        equally (CLASSES), in the configured ranges, and its heading (heading mode)."""
+        equally (CLASSES), in the configured ranges (their `command_share` at a curriculum
+        `level`), and its heading (heading mode)."""
         cfg, xp = self.config, draws.xp
         k = [draws.fold_in(key, i) for i in range(6)]
         share = (1.0 - cfg.command_zero_share) / (len(CLASSES) - 1)
@@ -136,6 +144,9 @@ class VelocityTask(Task):
               + is_("diagonal", "walk and turn") * full[0])
         vy = is_("sideways", "diagonal", "walk and turn") * full[1]
         wz = is_("turn", "walk and turn") * full[2]
+        open_share = self.command_share(level)
+        if open_share is not None:  # the ranges narrowed about zero: each component scaled alike
+            vx, vy, wz = vx * open_share, vy * open_share, wz * open_share
         mode = (draws.uniform(k[4], (), 0.0, 1.0) < cfg.command_heading_share) * (1.0 - is_("zero"))
         heading = draws.uniform(k[5], (), -np.pi, np.pi)
         return xp.stack([vx, vy, wz * (1.0 - mode), mode]).astype(xp.float32), heading
