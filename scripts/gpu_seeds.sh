@@ -56,14 +56,19 @@ for seed in "$@"; do
   for ckpt in "$run"/checkpoints/*/; do
     [ -f "$ckpt/step.json" ] || continue
     mkdir -p "$dest/checkpoints/$(basename "$ckpt")"
-    cp -r "$ckpt/params" "$dest/checkpoints/$(basename "$ckpt")/"
-    # The optimizer's and resume state's files stay behind, so their checksums go too: the params'
-    # checksum stays and is checked when they load.
-    "$PY" -c "import json, sys; m = json.load(open(sys.argv[1]))
-for k in ('optimizer_sha256', 'resume', 'resume_sha256'): m.pop(k, None)
-json.dump(m, open(sys.argv[2], 'w'))" "$ckpt/step.json" "$dest/checkpoints/$(basename "$ckpt")/step.json"
+    cp -r "$ckpt/params" "$ckpt/step.json" "$dest/checkpoints/$(basename "$ckpt")/"
   done
 done
+# The optimizer's and resume state's files stay behind, so their checksums go too: the params'
+# checksum stays and is checked when they load.
+"$PY" - "$OUT" <<'EOF'
+import json, pathlib, sys
+for path in pathlib.Path(sys.argv[1]).glob("*/checkpoints/*/step.json"):
+    meta = json.loads(path.read_text())
+    for key in ("optimizer_sha256", "resume", "resume_sha256"):
+        meta.pop(key, None)
+    path.write_text(json.dumps(meta))
+EOF
 # One archive per run: a few files to copy off the machine, not a few hundred in deep folders.
 for seed in "$@"; do
   tar czf "$OUT/$RECIPE-s$seed.tgz" -C "$OUT" "$RECIPE-s$seed" && rm -r "${OUT:?}/$RECIPE-s$seed"

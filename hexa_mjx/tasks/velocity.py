@@ -84,7 +84,8 @@ class VelocityTask(Task):
     def command_share(self, level):
         """The share of each command range open at curriculum `level`: on flat ground with
         curriculum_levels N, (level + 1) / N (legged_gym's command curriculum, on this task's
-        walking rule); 1 on a terrain, whose levels grade the ground, and without a curriculum."""
+        walking rule); None (the full ranges, the draw left untouched) on a terrain, whose levels
+        grade the ground, and without a curriculum."""
         cfg = self.config
         if not cfg.curriculum_levels or cfg.terrain != "flat":
             return None
