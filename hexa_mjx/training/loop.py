@@ -66,6 +66,12 @@ def init_params(cfg: TrainConfig, env):
     return normalizer, nets.policy_network.init(key_policy), nets.value_network.init(key_value)
 
 
+def templates(cfg: TrainConfig, env):
+    """(params, Adam state) shaped as a run of `cfg` holds them: what checkpoints restore into."""
+    params = init_params(cfg, env)
+    return params, adam_template(params)
+
+
 def policy_maker(cfg: TrainConfig, env):
     """brax's `make_policy(params, deterministic)` for the config's networks."""
     from brax.training.agents.ppo import networks as ppo_networks
@@ -171,8 +177,9 @@ def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
     # evaluation's own environment object (process 0's) is traced on the evaluator's compile thread.
     env = make_env_for(cfg, curriculum_levels=cfg.curriculum_levels)
     eval_env = make_env_for(cfg) if main else env
-    template = init_params(cfg, env)
-    optimizer_template = adam_template(template)
+    # Templates: their structure and shapes are used, never their values, so one compiled program
+    # makes them (eagerly, each of their few dozen operations compiled on its own: about 2 s).
+    template, optimizer_template = jax.jit(lambda: templates(cfg, env))()
     start_step, restore, optimizer, saved, logged = 0, None, None, None, set()
     if main:
         start_step, restore, optimizer, saved = resume_point(cfg, run_dir, template, optimizer_template)
