@@ -158,23 +158,11 @@ def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=No
     reset = jax.pmap(env.reset, axis_name=AXIS)
     if programs is not None:  # PPO's settings shape the programs too
         programs = [programs, dataclasses.asdict(settings), anneal_lr]
-        reset = program_store.compiled(reset, (reset_keys,), "reset", programs)
-    env_state = reset(reset_keys)
-    leaves = resume["env_state"] if resume is not None else environments
-    if leaves is not None:  # the environments as they were: same structure, saved leaves
-        expected = jax.tree.leaves(env_state)
-        fits = len(leaves) == len(expected) and all(np.shape(a) == b.shape for a, b in zip(leaves, expected))
-        if not fits and resume is not None:
-            raise ValueError("the saved environment state does not fit this run's environments")
-        if fits:
-            env_state = jax.tree.unflatten(jax.tree.structure(env_state),
-                                           [jp.asarray(a, dtype=b.dtype) for a, b in zip(leaves, expected)])
-        else:
-            print("the saved environments do not fit this run's: they start afresh")
-    if resume is not None:
-        local_key = jp.asarray(resume["local_key"])
-
-    obs_shape = env_state.obs.shape[2:]
+    # The update is traced from the shapes the reset will return (strongly typed, as training
+    # holds them), while XLA compiles the reset on a worker thread (tracing is Python: one core).
+    reset = program_store.prepare(reset, (reset_keys,), "reset", programs)
+    env_shapes = reset.out_info
+    obs_shape = env_shapes.obs.shape[2:]
     network = network_factory(obs_shape, env.action_size, preprocess_observations_fn=running_statistics.normalize)
     make_policy = ppo_networks.make_inference_fn(network)
     optimizer = make_optimizer(settings)
@@ -212,7 +200,26 @@ def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=No
     if resume is not None:
         step, first_interval, first_update = resume["step"], resume["interval"], resume["update"]
         state = state.replace(env_steps=types.UInt64(hi=step >> 32, lo=step & 0xFFFFFFFF))
-    state, env_state = replicate(strong_types(state), devices), strong_types(env_state)
+    state = replicate(strong_types(state), devices)
+    if resume is not None:
+        local_key = jp.asarray(resume["local_key"])
+    key_shape = jax.eval_shape(lambda k: jax.random.split(k, len(devices)), local_key)
+    reset.begin()  # after the eager operations above: they would wait for the compile
+    update = program_store.prepare(update, (state, env_shapes, key_shape), "update", programs).begin()
+
+    env_state = reset.result()(reset_keys)
+    leaves = resume["env_state"] if resume is not None else environments
+    if leaves is not None:  # the environments as they were: same structure, saved leaves
+        expected = jax.tree.leaves(env_state)
+        fits = len(leaves) == len(expected) and all(np.shape(a) == b.shape for a, b in zip(leaves, expected))
+        if not fits and resume is not None:
+            raise ValueError("the saved environment state does not fit this run's environments")
+        if fits:
+            env_state = jax.tree.unflatten(jax.tree.structure(env_state),
+                                           [jp.asarray(a, dtype=b.dtype) for a, b in zip(leaves, expected)])
+        else:
+            print("the saved environments do not fit this run's: they start afresh")
+    env_state = strong_types(env_state)
 
     def host_params():
         return jax.tree.map(np.asarray, unpmap((state.normalizer_params, state.params.policy, state.params.value,
@@ -232,8 +239,8 @@ def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=No
             epoch_key, local_key = jax.random.split(local_key)
             key = jax.random.split(epoch_key, len(devices))
         for done in range(first_update if interval == first_interval else 0, updates_per_interval):
-            if not compiled:  # the first update compiles: on a thread, so that a signal is answered meanwhile
-                update, compiled = program_store.compiled_aside(update, (state, env_state, key), "update", programs), True
+            if not compiled:  # the first update waits for its program
+                update, compiled = update.result(), True
             state, env_state, key = update(state, env_state, key)
             step += steps_per_update
             if on_update is not None:

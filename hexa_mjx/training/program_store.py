@@ -93,36 +93,111 @@ def compiled(fn, args: tuple, name: str, describe) -> jax.stages.Compiled:
     program, else compiled and kept. Without a description (`describe` None) or a store (the
     compile cache off, or a multi-process run, whose executables name other processes' devices)
     it is `fn.lower(*args).compile()`."""
+    return prepare(fn, args, name, describe).result()
+
+
+class Pending:
+    """A program `prepare` traced and lowered (or loaded): its outputs' shapes at once
+    (`out_info`); XLA's compile on a worker thread from `begin()`; the compiled program from
+    `result()`."""
+
+    def __init__(self, out_info, program=None, work=None):
+        self.out_info, self._program, self._work, self._error, self._worker = out_info, program, work, None, None
+
+    def begin(self) -> "Pending":
+        """Start XLA's compile on a worker thread (a daemon: a stop need not wait for it)."""
+        if self._work is not None and self._worker is None:
+            self._worker = threading.Thread(target=self._run, daemon=True)
+            self._worker.start()
+        return self
+
+    def _run(self) -> None:
+        try:
+            self._program = self._work()
+        except Exception as e:  # noqa: BLE001 - raised again by result(), on the caller's thread
+            self._error = e
+
+    def result(self) -> jax.stages.Compiled:
+        """The compiled program, waiting for it in short joins: XLA's compile holds the thread
+        that runs it for up to a minute, and Python answers a signal (train.py's SIGTERM) only
+        between its own bytecodes."""
+        self.begin()
+        while self._worker is not None and self._worker.is_alive():
+            self._worker.join(0.1)
+        if self._error is not None:
+            raise self._error
+        return self._program
+
+
+def prepare(fn, args: tuple, name: str, describe) -> Pending:
+    """`compiled(fn, args, name, describe)` in two steps: traced and lowered now, on this thread
+    (or loaded from the store), and compiled on a worker thread from `Pending.begin()`, so that
+    this thread can trace the next program meanwhile. `args` may be `jax.ShapeDtypeStruct`s:
+    shapes are all a program depends on. (JAX compiles one program at a time: an operation run
+    eagerly while a compile is under way waits for it.)"""
+    folder = store_dir() if jax.process_count() == 1 and describe is not None else None
+    path = None
+    if folder is not None:
+        try:
+            path = folder / f"{name}-{program_key(name, describe, args)}.bin"
+        except (pickle.PicklingError, TypeError, AttributeError):  # a structure that cannot be keyed: not kept
+            path = None
+    if path is not None and path.exists():
+        loaded = _load(path, args)
+        if loaded is not None:
+            return Pending(loaded[1], program=loaded[0])
+    lowered = fn.lower(*args)
+    shapes = out_shapes(lowered)
+    return Pending(shapes, work=lambda: _compile(lowered, path, shapes))
+
+
+def out_shapes(lowered: jax.stages.Lowered):
+    """A lowered program's outputs as `jax.ShapeDtypeStruct`s (strongly typed, no sharding)."""
+    try:
+        shapes = [a.shape for a in jax.tree.leaves(lowered.out_info)]
+        dtypes = [a.dtype for a in jax.tree.leaves(lowered.out_info)]
+    except KeyError:  # jax 0.9's classic pmap keeps its outputs' shapes per device only
+        shards = lowered._lowering.compile_args["shards"]
+        shapes = [(shards.num_local_shards,) + a.shape[1:] for a in shards.out_sharded_avals]
+        dtypes = [a.dtype for a in shards.out_sharded_avals]
+    return lowered.out_tree.unflatten([jax.ShapeDtypeStruct(x, d) for x, d in zip(shapes, dtypes)])
+
+
+def _load(path: Path, args: tuple):
+    """(program, its outputs' shapes) kept at `path`, or None (said on the console) when it cannot
+    be loaded."""
     from jax.experimental import serialize_executable
 
-    folder = store_dir() if jax.process_count() == 1 and describe is not None else None
-    if folder is None:
-        return fn.lower(*args).compile()
     try:
-        path = folder / f"{name}-{program_key(name, describe, args)}.bin"
-    except (pickle.PicklingError, TypeError, AttributeError):  # a structure that cannot be keyed: not kept
-        return fn.lower(*args).compile()
-    if path.exists():
-        try:
-            data, out_tree = pickle.loads(path.read_bytes())
-            _prepare_kernels()
-            program = serialize_executable.deserialize_and_load(data, jax.tree.structure((args, {})), out_tree)
-            path.touch()  # most recently used
-            return program
-        except Exception as e:  # noqa: BLE001 - a damaged or foreign file: compile instead
-            print(f"could not load the kept program {path.name} ({type(e).__name__}); compiling it again")
+        data, out_tree, shapes = pickle.loads(path.read_bytes())
+        _prepare_kernels()
+        program = serialize_executable.deserialize_and_load(data, jax.tree.structure((args, {})), out_tree)
+        path.touch()  # most recently used
+        return program, out_tree.unflatten([jax.ShapeDtypeStruct(shape, dtype) for shape, dtype in shapes])
+    except Exception as e:  # noqa: BLE001 - a damaged or foreign file: compile instead
+        print(f"could not load the kept program {path.name} ({type(e).__name__}); compiling it again")
+        return None
+
+
+def _compile(lowered, path: Path | None, shapes) -> jax.stages.Compiled:
+    """`lowered` compiled, and kept at `path` (None: not kept) with its outputs' `shapes` when XLA
+    compiled it afresh."""
+    from jax.experimental import serialize_executable
+
+    if path is None:
+        return lowered.compile()
     _listen_for_cache_hits()
     hits = getattr(_hits, "count", 0)
-    program = fn.lower(*args).compile()
+    program = lowered.compile()
     if getattr(_hits, "count", 0) > hits:  # loaded from XLA's cache: it would serialize broken
         return program
     try:
         data, _, out_tree = serialize_executable.serialize(program)
     except (ValueError, NotImplementedError):  # a program JAX cannot serialize: it compiles every run
         return program
-    folder.mkdir(parents=True, exist_ok=True)
-    atomic.write(path, pickle.dumps((data, out_tree)))
-    for old in sorted(folder.glob("*.bin"), key=lambda p: p.stat().st_mtime, reverse=True)[KEEP:]:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    atomic.write(path, pickle.dumps((data, out_tree, [(x.shape, str(x.dtype)) for x in jax.tree.leaves(shapes)])))
+    for old in sorted(path.parent.glob("*.bin"), key=lambda p: p.stat().st_mtime, reverse=True)[KEEP:]:
         old.unlink(missing_ok=True)
     return program
 
@@ -143,26 +218,3 @@ def _count_cache_hits(event: str, **_) -> None:
 @functools.cache
 def _listen_for_cache_hits() -> None:
     jax.monitoring.register_event_listener(_count_cache_hits)
-
-
-def compiled_aside(fn, args: tuple, name: str, describe):
-    """`fn` (jitted or pmapped) compiled for `args` on a worker thread, while this thread waits in
-    short joins: XLA's compile holds the thread that runs it for up to a minute, and Python
-    answers a signal (train.py's SIGTERM) only between its own bytecodes. The same program as
-    `fn(*args)` would compile, from the same cache; kept as `name` under `describe` unless that is
-    None."""
-    result = {}
-
-    def work():
-        try:
-            result["compiled"] = compiled(fn, args, name, describe)
-        except Exception as e:  # noqa: BLE001 - raised again on the caller's thread
-            result["error"] = e
-
-    worker = threading.Thread(target=work, daemon=True)  # daemon: a stop during the compile does not wait for it
-    worker.start()
-    while worker.is_alive():
-        worker.join(0.1)
-    if "error" in result:
-        raise result["error"]
-    return result["compiled"]
