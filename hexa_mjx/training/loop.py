@@ -17,6 +17,7 @@ from pathlib import Path
 
 import jax
 import jax.numpy as jp
+import numpy as np
 from flax import linen
 
 from hexa_mjx.training import distributed, crash_points as faults, ppo, resume as exact, selection
@@ -67,9 +68,11 @@ def init_params(cfg: TrainConfig, env):
 
 
 def templates(cfg: TrainConfig, env):
-    """(params, Adam state) shaped as a run of `cfg` holds them: what checkpoints restore into."""
-    params = init_params(cfg, env)
-    return params, adam_template(params)
+    """(params, Adam state) shaped as a run of `cfg` holds them, as NumPy zeros: what checkpoints
+    restore into and programs are compiled for. Made from shapes alone: run, their few dozen
+    operations would each compile on its own (about 1.5 s on a 2-core CPU)."""
+    shapes = jax.eval_shape(lambda: (lambda params: (params, adam_template(params)))(init_params(cfg, env)))
+    return jax.tree.map(lambda x: np.zeros(x.shape, x.dtype), shapes)
 
 
 def policy_maker(cfg: TrainConfig, env):
@@ -177,9 +180,7 @@ def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
     # evaluation's own environment object (process 0's) is traced on the evaluator's compile thread.
     env = make_env_for(cfg, curriculum_levels=cfg.curriculum_levels)
     eval_env = make_env_for(cfg) if main else env
-    # Templates: their structure and shapes are used, never their values, so one compiled program
-    # makes them (eagerly, each of their few dozen operations compiled on its own: about 2 s).
-    template, optimizer_template = jax.jit(lambda: templates(cfg, env))()
+    template, optimizer_template = templates(cfg, env)
     start_step, restore, optimizer, saved, logged = 0, None, None, None, set()
     if main:
         start_step, restore, optimizer, saved = resume_point(cfg, run_dir, template, optimizer_template)

@@ -186,11 +186,16 @@ def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=No
 
     update = jax.pmap(update, axis_name=AXIS, donate_argnums=(0, 1))
 
-    params = ppo_losses.PPONetworkParams(policy=network.policy_network.init(key_policy),
-                                         value=network.value_network.init(key_value))
-    state = TrainingState(optimizer_state=optimizer.init(params), params=params,
-                          normalizer_params=running_statistics.init_state(specs.Array(obs_shape, jp.dtype("float32"))),
-                          env_steps=types.UInt64(hi=0, lo=0))
+    def initial_state():
+        params = ppo_losses.PPONetworkParams(policy=network.policy_network.init(key_policy),
+                                             value=network.value_network.init(key_value))
+        return TrainingState(optimizer_state=optimizer.init(params), params=params,
+                             normalizer_params=running_statistics.init_state(specs.Array(obs_shape, jp.dtype("float32"))),
+                             env_steps=types.UInt64(hi=0, lo=0))
+
+    # One compiled program, the same bits as brax's eager init (tests/test_ppo.py): run eagerly,
+    # each of its few dozen operations compiles on its own (about 1.5 s on a 2-core CPU).
+    state = jax.jit(initial_state)()
     if restore_params is not None:
         normalizer, policy, value = restore_params
         state = state.replace(normalizer_params=normalizer, params=ppo_losses.PPONetworkParams(policy, value))
