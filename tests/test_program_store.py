@@ -83,6 +83,7 @@ ABSTRACT = textwrap.dedent("""
     prepare_jax(cpu_devices=2, compile_cache=False)
     import jax, jax.numpy as jp
     from hexa_mjx.training import program_store
+    from hexa_mjx.training.ppo import strong_types
 
     def reset(key):  # several leaves, one of them weakly typed, as an environment state has
         return {"obs": jax.random.normal(key, (4, 3)), "done": 0.0 * jp.sum(key), "steps": jp.zeros(4, jp.int32)}
@@ -96,7 +97,7 @@ ABSTRACT = textwrap.dedent("""
     shapes = [(x.shape, x.dtype) for x in jax.tree.leaves(pending.out_info)]
     print("shapes", shapes == [(x.shape, x.dtype) for x in jax.tree.leaves(state)])
     scale = jp.ones(2)
-    state = jax.tree.map(lambda x: jp.asarray(x).astype(x.dtype), state)  # strongly typed, as training holds it
+    state = strong_types(state)  # as training holds it
     text = jax.pmap(step).lower(pending.out_info, scale).as_text()
     print("program", text == jax.pmap(step).lower(state, scale).as_text())
 """)

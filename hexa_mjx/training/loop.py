@@ -71,8 +71,12 @@ def templates(cfg: TrainConfig, env):
     """(params, Adam state) shaped as a run of `cfg` holds them, as NumPy zeros: what checkpoints
     restore into and programs are compiled for. Made from shapes alone: run, their few dozen
     operations would each compile on its own (about 1.5 s on a 2-core CPU)."""
-    shapes = jax.eval_shape(lambda: (lambda params: (params, adam_template(params)))(init_params(cfg, env)))
-    return jax.tree.map(lambda x: np.zeros(x.shape, x.dtype), shapes)
+
+    def made():
+        params = init_params(cfg, env)
+        return params, adam_template(params)
+
+    return jax.tree.map(lambda x: np.zeros(x.shape, x.dtype), jax.eval_shape(made))
 
 
 def policy_maker(cfg: TrainConfig, env):

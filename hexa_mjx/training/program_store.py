@@ -154,13 +154,11 @@ def prepare(fn, args: tuple, name: str, describe) -> Pending:
 def out_shapes(lowered: jax.stages.Lowered):
     """A lowered program's outputs as `jax.ShapeDtypeStruct`s (strongly typed, no sharding)."""
     try:
-        shapes = [a.shape for a in jax.tree.leaves(lowered.out_info)]
-        dtypes = [a.dtype for a in jax.tree.leaves(lowered.out_info)]
+        avals = [(a.shape, a.dtype) for a in jax.tree.leaves(lowered.out_info)]
     except KeyError:  # jax 0.9's classic pmap keeps its outputs' shapes per device only
         shards = lowered._lowering.compile_args["shards"]
-        shapes = [(shards.num_local_shards,) + a.shape[1:] for a in shards.out_sharded_avals]
-        dtypes = [a.dtype for a in shards.out_sharded_avals]
-    return lowered.out_tree.unflatten([jax.ShapeDtypeStruct(x, d) for x, d in zip(shapes, dtypes)])
+        avals = [((shards.num_local_shards,) + a.shape[1:], a.dtype) for a in shards.out_sharded_avals]
+    return lowered.out_tree.unflatten([jax.ShapeDtypeStruct(shape, dtype) for shape, dtype in avals])
 
 
 def _load(path: Path, args: tuple):
