@@ -9,6 +9,7 @@ import pytest
 
 import hexa_mjx
 from hexa_mjx.mdp import failure_schedule as fs
+from hexa_mjx.robot import kinematics
 from hexa_mjx.training import loop as training
 from hexa_mjx.engines import wrappers
 from hexa_mjx.training.config import ConfigError, parse_args, validate
@@ -74,7 +75,49 @@ def test_no_leg_fails_before_the_start_then_every_episode_has_one(scheduled):
     row = summary(state)
     assert row["leg_failure/rate"] == 1.0
     assert abs(sum(row[f"leg_failure/p_leg{k}"] for k in range(1, 7)) - 1) < 1e-5
-    assert 0.0 <= row["leg_failure/goals_intact"] < 1.0  # the prior (1 goal), pulled down by goalless episodes
+    assert 0.0 <= row["leg_failure/progress_intact"] < 1.0  # the prior (1 goal), pulled down by goalless episodes
+
+
+def test_a_command_task_weighs_each_leg_by_the_metres_walked_along_its_commands():
+    """Velocity commands have no goals: an episode's progress is the metres it walked along the
+    commanded direction, summed here from each step's state, by condition, at the episode's end."""
+    env = hexa_mjx.make_env(task="velocity", leg_failure="random", leg_failure_rate=1.0, episode_length=EPISODE)
+    wrapped = wrappers.wrap_for_training(env, episode_length=EPISODE, failure_schedule=dict(start_after=0,
+                                                                                            adaptive=True))
+    step = jax.jit(wrapped.step)
+    state = jax.jit(wrapped.reset)(jax.random.split(jax.random.PRNGKey(1), BATCH))
+    failed = np.asarray(state.info["failed_legs"])
+    assert (failed.sum(-1) == 1).all()  # one leg each, from the first episode
+    walked = np.zeros(BATCH)
+    actions = 0.8 * jp.sin(jp.arange(BATCH * 18, dtype=jp.float32).reshape(BATCH, 18))
+    for _ in range(EPISODE):
+        for i in range(BATCH):  # metres along the command, at the velocity each step starts from
+            data = jax.tree.map(lambda x: x[i], state.pipeline_state)
+            wanted = env.task.commanded(np.asarray(data.userdata), np.asarray(data.qpos), float(env.heading(data)))[:2]
+            heading = kinematics.yaw(np.asarray(data.qpos[3:7]))
+            c, s = np.cos(heading), np.sin(heading)  # the torso's velocity turned into the heading frame
+            velocity = np.array([[c, s], [-s, c]]) @ np.asarray(data.qvel[:2])
+            speed = np.linalg.norm(wanted)
+            walked[i] += env.dt * (wanted @ velocity) / max(speed, 1e-6)
+        before = np.asarray(state.info["leg_failure_stats"][0])
+        state = step(state, actions)
+    assert (np.asarray(state.info["t"]) == 0).all()  # every episode ended on the last step
+    np.testing.assert_allclose(state.info["leg_failure_walked_m"], 0.0)  # and its count started afresh
+    added = np.asarray(state.info["leg_failure_stats"][0]) - fs.DECAY * before
+    expected = np.zeros((7, 2))
+    for i in range(BATCH):
+        expected[1 + failed[i].argmax()] += [walked[i], 1.0]
+    np.testing.assert_allclose(added, expected, atol=1e-5)
+    assert np.abs(walked).max() > 1e-3  # the sums compared above are not all zero
+
+
+def test_a_task_without_goals_or_commands_has_nothing_to_weigh_legs_by(tmp_path, monkeypatch):
+    from hexa_mjx.tasks.stand import StandTask
+
+    monkeypatch.setattr(StandTask, "has_goal", False)  # every task has one or the other: one without either
+    with pytest.raises(ConfigError, match="neither goals nor commands"):
+        validate(parse_args(["--task", "stand", "--leg_failure", "random", "--leg_failure_adaptive",
+                             "--run_dir", str(tmp_path / "run")]), writes=False)
 
 
 def test_evaluation_environments_are_not_scheduled():
@@ -102,10 +145,10 @@ def test_the_schedule_is_logged_in_the_runs_rows(tmp_path):
 
     cfg = parse_args(["--leg_failure", "random", "--leg_failure_adaptive", "--run_dir", str(tmp_path)])
     logger = Logger(tmp_path, cfg, 0)
-    logger(16384, {"leg_failure/p_leg3": 0.4, "leg_failure/goals_intact": 9.5, "other/thing": 1.0})
+    logger(16384, {"leg_failure/p_leg3": 0.4, "leg_failure/progress_intact": 9.5, "other/thing": 1.0})
     logger.close()
     row = json.loads((tmp_path / "metrics.jsonl").read_text().splitlines()[-1])
-    assert row["leg_failure/p_leg3"] == 0.4 and row["leg_failure/goals_intact"] == 9.5 and "other/thing" not in row
+    assert row["leg_failure/p_leg3"] == 0.4 and row["leg_failure/progress_intact"] == 9.5 and "other/thing" not in row
 
 
 def test_the_start_is_counted_per_environment_from_the_checkpoint():

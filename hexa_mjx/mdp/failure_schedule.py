@@ -6,9 +6,12 @@ Two training-only settings of `--leg_failure random` (evaluation always draws as
   learns to walk intact (a run that failed legs from step 0 had not learnt to reach goals
   within the hour; fine-tuning a walking policy had, docs/RESULTS.md "Walking on with a failed leg").
 - `--leg_failure_adaptive`: the failed leg is drawn by how much losing it costs the policy now,
-  instead of uniformly. The cost of leg k is its deficit in goals reached per episode against the
-  intact episodes, 1 - goals_k / goals_intact, over the training batch's finished episodes
-  (decayed with a half-life of HALF_LIFE control steps). UNIFORM_SHARE of the draws are uniform
+  instead of uniformly. The cost of leg k is its deficit in progress per episode against the
+  intact episodes, 1 - progress_k / progress_intact, over the training batch's finished episodes
+  (decayed with a half-life of HALF_LIFE control steps). Progress is the goals reached in a task
+  with goals, and in a task with commands the metres walked along them (the commanded velocity's
+  direction, as the terrain curriculum measures it): commands are drawn alike with or without a
+  failure, so a leg whose loss slows the walk, or ends it in a fall, walks fewer metres. UNIFORM_SHARE of the draws are uniform
   over the legs; the rest go to each leg in proportion to max(deficit, FLOOR) ** 2: twice the
   deficit, four times the practice. The uniform share keeps every leg in practice, as prioritized
   replay keeps a floor: a deficit-only draw starved the legs a gait did not use yet and spent most
@@ -35,20 +38,21 @@ DECAY = 0.5 ** (1 / HALF_LIFE)
 
 def leg_probabilities(stats: jax.Array) -> jax.Array:
     """Probability of each leg being the failed one from `stats` (1 + legs, 2): the (decayed) sums of
-    goals reached and of episodes, intact first, then with leg 1, 2, ... failed."""
+    progress (goals reached, or metres walked) and of episodes, intact first, then with leg 1, 2, ...
+    failed."""
     mean = stats[:, 0] / jp.maximum(stats[:, 1], 1e-9)
     deficit = jp.clip(1.0 - mean[1:] / jp.maximum(mean[0], 1e-9), FLOOR, 1.0)
     weight = deficit ** 2
     return UNIFORM_SHARE / weight.size + (1.0 - UNIFORM_SHARE) * weight / weight.sum()
 
 
-def episode_stats(failed_legs: jax.Array, goals: jax.Array, ended: jax.Array) -> jax.Array:
-    """(1 + legs, 2) sums over a batch of [goals reached, episodes] of the episodes that `ended`,
-    by condition: intact, then each failed leg. `failed_legs` (batch, legs) is 0/1."""
+def episode_stats(failed_legs: jax.Array, progress: jax.Array, ended: jax.Array) -> jax.Array:
+    """(1 + legs, 2) sums over a batch of [progress, episodes] of the episodes that `ended`, by
+    condition: intact, then each failed leg. `failed_legs` (batch, legs) is 0/1."""
     intact = (failed_legs.sum(-1, keepdims=True) == 0).astype(jp.float32)
     condition = jp.concatenate([intact, failed_legs], axis=-1)  # two failed legs count for each
     weight = ended.astype(jp.float32)[:, None] * condition
-    return jp.stack([(weight * goals[:, None]).sum(0), weight.sum(0)], axis=-1)
+    return jp.stack([(weight * progress[:, None]).sum(0), weight.sum(0)], axis=-1)
 
 
 class LegFailureSchedule(Wrapper):
@@ -58,7 +62,12 @@ class LegFailureSchedule(Wrapper):
     def __init__(self, env, start_after: int = 0, adaptive: bool = False):
         super().__init__(env)
         self.start_after, self.adaptive = start_after, adaptive
-        config = env.unwrapped.config
+        base = env.unwrapped
+        self.walks = base.task.uses_command  # progress: metres walked along the commands, not goals
+        self._walking = jax.vmap(lambda data: base.task.walking(data.qpos, data.qvel, base.command(data),
+                                                                base.heading(data)))
+        self.dt = base.dt
+        config = base.config
         self.rate = config.leg_failure_rate
         legs = len(env.unwrapped.robot.legs)
         weights = np.asarray(config.leg_failure_weights or [1.0] * legs, np.float32)
@@ -71,19 +80,27 @@ class LegFailureSchedule(Wrapper):
         state.info["failure_clock"] = jp.zeros(batch, jp.int32)
         state.info["leg_failure_rate"] = jp.full(batch, self.rate if self.start_after == 0 else 0.0, jp.float32)
         state.info["leg_failure_p"] = jp.broadcast_to(jp.asarray(self.base_p), batch + (legs,))
-        # A prior of one episode with one goal in each condition: every leg alike until episodes end.
+        # A prior of one episode with one unit of progress (a goal, a metre) in each condition: every
+        # leg alike until episodes end.
         state.info["leg_failure_stats"] = jp.ones(batch + (legs + 1, 2), jp.float32)
+        if self.walks:
+            state.info["leg_failure_walked_m"] = jp.zeros(batch, jp.float32)
         if self.start_after:
             state.info["failed_legs"] = jp.zeros_like(state.info["failed_legs"])
         return state
 
     def step(self, state: State, action: jax.Array) -> State:
-        failed, goals = state.info["failed_legs"], state.info["goals"]
+        before = state
         state = self.env.step(state, action)
         clock = state.info["failure_clock"] + 1
         ended = state.info["t"] == 0  # HexapodEnv zeroes its step count when an episode ends
-        stats = DECAY * state.info["leg_failure_stats"][0] + episode_stats(
-            failed, goals + state.metrics["goals_reached"], ended)
+        if self.walks:  # this step counted at the velocity it starts from: the state after may be a reset's
+            _, along = self._walking(before.pipeline_state)
+            progress = before.info["leg_failure_walked_m"] + along * self.dt
+            state.info["leg_failure_walked_m"] = jp.where(ended, 0.0, progress)
+        else:
+            progress = before.info["goals"] + state.metrics["goals_reached"]
+        stats = DECAY * state.info["leg_failure_stats"][0] + episode_stats(before.info["failed_legs"], progress, ended)
         p = leg_probabilities(stats) if self.adaptive else jp.asarray(self.base_p)
         rate = jp.where(clock[0] >= self.start_after, self.rate, 0.0)
         batch = clock.shape
@@ -94,13 +111,14 @@ class LegFailureSchedule(Wrapper):
 
 
 def schedule_summary(info) -> dict:
-    """{"leg_failure/rate", "leg_failure/p_leg<k>", "leg_failure/goals_intact", "leg_failure/goals_leg<k>"}
-    from the training environments' `info`, laid out (devices, environments per device, ...): the
-    current rate and leg probabilities, and goals per finished episode in each condition."""
+    """{"leg_failure/rate", "leg_failure/p_leg<k>", "leg_failure/progress_intact",
+    "leg_failure/progress_leg<k>"} from the training environments' `info`, laid out (devices,
+    environments per device, ...): the current rate and leg probabilities, and progress per
+    finished episode in each condition (goals reached, or metres walked along the commands)."""
     stats = np.asarray(info["leg_failure_stats"])[:, 0].sum(0)  # each device's batch, summed
     p = np.asarray(info["leg_failure_p"])[:, 0].mean(0)
-    goals = stats[:, 0] / np.maximum(stats[:, 1], 1e-9)
+    progress = stats[:, 0] / np.maximum(stats[:, 1], 1e-9)
     return {"leg_failure/rate": float(np.asarray(info["leg_failure_rate"])[:, 0].mean()),
-            "leg_failure/goals_intact": float(goals[0]),
-            **{f"leg_failure/goals_leg{k}": float(g) for k, g in enumerate(goals[1:], start=1)},
+            "leg_failure/progress_intact": float(progress[0]),
+            **{f"leg_failure/progress_leg{k}": float(g) for k, g in enumerate(progress[1:], start=1)},
             **{f"leg_failure/p_leg{k}": float(q) for k, q in enumerate(p, start=1)}}

@@ -112,9 +112,9 @@ def validate(cfg: TrainConfig, writes: bool = True) -> TrainConfig:
     if cfg.leg_failure_adaptive and cfg.leg_failure_weights:
         raise ConfigError("--leg_failure_adaptive draws the failed leg by its cost; it replaces "
                           "--leg_failure_weights: keep one of the two")
-    if cfg.leg_failure_adaptive and not task_class(cfg.task).has_goal:
-        raise ConfigError(f"--leg_failure_adaptive weighs each leg by the goals reached without it; the {cfg.task} "
-                          "task has no goals: drop it")
+    if cfg.leg_failure_adaptive and not (task.has_goal or task.uses_command):
+        raise ConfigError(f"--leg_failure_adaptive weighs each leg by the goals reached or the commanded metres "
+                          f"walked without it; the {cfg.task} task has neither goals nor commands: drop it")
     if cfg.leg_failure_after < 0:
         raise ConfigError(f"--leg_failure_after is a number of env steps, 0 or more, got {cfg.leg_failure_after}")
     run_dir = Path(cfg.run_dir) if cfg.run_dir else default_run_dir(cfg)
