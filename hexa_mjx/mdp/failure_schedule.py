@@ -11,9 +11,10 @@ Two training-only settings of `--leg_failure random` (evaluation always draws as
   (decayed with a half-life of HALF_LIFE control steps). Progress is the goals reached in a task
   with goals, and in a task with commands the metres walked along them (the commanded velocity's
   direction, as the terrain curriculum measures it): commands are drawn alike with or without a
-  failure, so a leg whose loss slows the walk, or ends it in a fall, walks fewer metres. UNIFORM_SHARE of the draws are uniform
-  over the legs; the rest go to each leg in proportion to max(deficit, FLOOR) ** 2: twice the
-  deficit, four times the practice. The uniform share keeps every leg in practice, as prioritized
+  failure, so a leg whose loss slows the walk, or ends it in a fall, walks fewer metres.
+  UNIFORM_SHARE of the draws are uniform over the legs; the rest go to each leg in proportion to
+  max(deficit, FLOOR) ** 2: twice the deficit, four times the practice. The uniform share keeps
+  every leg in practice, as prioritized
   replay keeps a floor: a deficit-only draw starved the legs a gait did not use yet and spent most
   of the practice on legs it could not yet learn to lose (docs/RESULTS.md, "One run with a failure schedule"). In the
   navigation task goals per episode measure both speed and falls (a fall ends the episode); in the
@@ -69,7 +70,7 @@ class LegFailureSchedule(Wrapper):
         self.dt = base.dt
         config = base.config
         self.rate = config.leg_failure_rate
-        legs = len(env.unwrapped.robot.legs)
+        legs = len(base.robot.legs)
         weights = np.asarray(config.leg_failure_weights or [1.0] * legs, np.float32)
         self.base_p = weights / weights.sum()
 

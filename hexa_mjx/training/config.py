@@ -82,7 +82,8 @@ class TrainConfig:
                                    "env steps, so the policy first learns to walk intact (hexa_mjx.mdp.failure_schedule)")
     leg_failure_adaptive: bool = field(ENV, False, "training with --leg_failure random: draw the failed leg by what "
                                        "losing it costs the policy now (goals, or metres walked along the commands, "
-                                       "per episode against intact episodes, over the batch) instead of uniformly (hexa_mjx.mdp.failure_schedule)")
+                                       "per episode against intact episodes, over the batch) instead of uniformly "
+                                       "(hexa_mjx.mdp.failure_schedule)")
     failure_mode: str = env_field("failure_mode")
     leg_failure_pairs: float = env_field("leg_failure_pairs")
     randomize: bool = field(ENV, False, "domain randomization: each environment its own friction, link masses, torso "
