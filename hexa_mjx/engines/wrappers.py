@@ -6,6 +6,7 @@ start-state noise would be drawn once per environment, not once per episode. `Fr
 draws it again at every episode boundary (`HexapodEnv.restart`), from a key kept per environment.
 `RandomizedVmap` replaces brax's VmapWrapper when a `randomization_fn` gives one model per
 environment (`hexa_mjx.mdp.randomization`). `LastReturn` keeps the returns the progress line reports.
+`CriticObservation` gives the value network more than the policy sees (an asymmetric actor-critic).
 """
 
 from __future__ import annotations
@@ -19,6 +20,9 @@ from brax.envs.base import State, Wrapper
 from brax.envs.wrappers import training as brax_training
 
 from hexa_mjx.mdp.failure_schedule import LegFailureSchedule
+from hexa_mjx.mdp.observations import failure_observation
+
+POLICY_KEY, CRITIC_KEY = "state", "privileged_state"  # brax's names for the two observations
 
 
 def _where_done(done, new, old):
@@ -93,6 +97,38 @@ class LastReturn(Wrapper):
         return state
 
 
+class CriticObservation(Wrapper):
+    """A batch's observation as two: `POLICY_KEY`, what the policy sees (noise included), and
+    `CRITIC_KEY`, what the value network sees: the same observation without its noise, then which
+    legs failed this episode and how (`failure_observation`), which the policy must infer from its
+    joints. Training only: the policy, and so every evaluation and deployment, sees the first alone."""
+
+    def __init__(self, env):
+        super().__init__(env)
+        base = env.unwrapped
+        self._observe = jax.vmap(base.observe)
+        # Where the failure mode is not "mixed", every failed leg fails the same way.
+        self._locked = 1.0 if base.config.failure_mode == "locked" else 0.0
+
+    @staticmethod
+    def critic_size(env) -> int:
+        """The length of the critic's observation of an (unwrapped) environment."""
+        return env.observation_size + 2 * len(env.robot.legs)
+
+    def _split(self, state: State) -> State:
+        failed = state.info["failed_legs"]
+        locked = state.info.get("failure_locked", jp.full(failed.shape[:-1], self._locked))
+        critic = jp.concatenate([self._observe(state.pipeline_state),
+                                 failure_observation(failed, locked[..., None].astype(failed.dtype))], axis=-1)
+        return state.replace(obs={POLICY_KEY: state.obs, CRITIC_KEY: critic})
+
+    def reset(self, rng: jax.Array) -> State:
+        return self._split(self.env.reset(rng))
+
+    def step(self, state: State, action: jax.Array) -> State:
+        return self._split(self.env.step(state.replace(obs=state.obs[POLICY_KEY]), action))
+
+
 def mean_last_return(state: State) -> float:
     """The mean of the environments' latest finished returns (NaN before any has finished)."""
     returns = np.asarray(state.info["last_return"])
@@ -101,14 +137,17 @@ def mean_last_return(state: State) -> float:
 
 
 def wrap_for_training(env, episode_length: int = 1000, action_repeat: int = 1, randomization_fn=None,
-                      track_returns: bool = False, fresh_starts: bool = True, failure_schedule: dict | None = None):
+                      track_returns: bool = False, fresh_starts: bool = True, failure_schedule: dict | None = None,
+                      critic_observation: bool = False):
     """brax's `envs.training.wrap` with `FreshStartAutoReset` in place of its AutoResetWrapper
     (brax's with `fresh_starts=False`) and `RandomizedVmap` in place of its VmapWrapper when there
     is a `randomization_fn`. `failure_schedule` (keyword arguments of
     `failure_schedule.LegFailureSchedule`) schedules the training environments' leg failures. With
-    `track_returns`, `LastReturn` keeps each environment's latest return."""
+    `track_returns`, `LastReturn` keeps each environment's latest return. With `critic_observation`,
+    `CriticObservation` gives the value network its own observation."""
     env = RandomizedVmap(env, randomization_fn) if randomization_fn else brax_training.VmapWrapper(env)
     env = brax_training.EpisodeWrapper(env, episode_length, action_repeat)
     env = FreshStartAutoReset(env) if fresh_starts else brax_training.AutoResetWrapper(env)
     env = LegFailureSchedule(env, **failure_schedule) if failure_schedule is not None else env
-    return LastReturn(env) if track_returns else env
+    env = LastReturn(env) if track_returns else env
+    return CriticObservation(env) if critic_observation else env

@@ -80,3 +80,10 @@ def proprioception_slices(joints: int) -> list[tuple[str, str, int]]:
     return [("torso linear velocity (x, y) heading frame, z world", "m/s", 3),
             ("torso angular velocity, body frame", "rad/s", 3), ("gravity direction, body frame", "", 3),
             *joint_slices(joints), ("previous action (control targets mapped back to [-1, 1])", "", joints)]
+
+
+def failure_observation(failed_legs, locked):
+    """What failed this episode, for a critic that may know it: per leg, limp (0/1), then per leg,
+    locked (0/1). `locked` is 1.0 where the failed legs are locked, 0.0 where limp."""
+    xp = namespace(failed_legs)
+    return xp.concatenate([failed_legs * (1.0 - locked), failed_legs * locked], axis=-1)

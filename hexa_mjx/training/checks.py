@@ -155,6 +155,8 @@ def init_checkpoint(cfg: TrainConfig) -> Path:
             NOTED.add(cfg.init_from)
             print(f"note: --init_from {cfg.init_from} is a {source.task}-task policy; its first inputs mean other "
                   f"things in the {cfg.task} task, and training adapts it from there")
+    if source.privileged_critic and not cfg.privileged_critic:
+        differ.append("privileged_critic True there, False here")
     if differ:
         raise ConfigError(f"--init_from {cfg.init_from}: its params do not fit this run ({'; '.join(differ)}); "
                           "set the same values or train from scratch")

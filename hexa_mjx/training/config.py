@@ -124,6 +124,9 @@ class TrainConfig:
                              "or brax's 'tanh_normal'", choices=["normal", "tanh_normal"])
     mean_init_scale: float = field(PPO, 0.01, "init scale of the policy mean's output layer (CleanRL: 0.01, so early "
                                    "actions are near 0)")
+    privileged_critic: bool = field(PPO, False, "asymmetric actor-critic: the value network also reads the "
+                                    "observation without its noise and which legs failed and how; the policy, "
+                                    "its ONNX file and evaluations are unchanged (hexa_mjx.training.critic)")
     init_noise_std: float = field(PPO, 1.0, "initial std of the policy's action noise, in action units (CleanRL: 1); "
                                   "learned after that")
 

@@ -23,8 +23,8 @@ from flax import linen
 from hexa_mjx.training import distributed, crash_points as faults, ppo, resume as exact, selection
 from hexa_mjx.mdp import randomization
 from hexa_mjx.training.checkpoints import (BEST, checkpoint_dir, list_checkpoints, load_checkpoint, load_latest,
-                                           load_resume, remove_temporaries, save_checkpoint)
-from hexa_mjx.training.config import TrainConfig, init_checkpoint, make_env_for, validate
+                                           load_resume, remove_temporaries, resolve_checkpoint, save_checkpoint)
+from hexa_mjx.training.config import TrainConfig, init_checkpoint, load_config, make_env_for, validate
 from hexa_mjx.mdp.curriculum import level_summary
 from hexa_mjx.mdp.failure_schedule import schedule_summary
 from hexa_mjx.training.jax_setup import devices_for, prepare_jax
@@ -32,38 +32,44 @@ from hexa_mjx.training.optimizer_state import adam_template
 from hexa_mjx.training.progress import Logger, keep_rows_up_to
 from hexa_mjx.training.run_lock import RunLock
 from hexa_mjx.evaluation.run_evaluator import RunEvaluator
-from hexa_mjx.engines.wrappers import mean_last_return
+from hexa_mjx.engines.wrappers import CRITIC_KEY, POLICY_KEY, mean_last_return
+from hexa_mjx.training.critic import actor_params, observation_sizes, with_critic
 from hexa_mjx import atomic
 
 
 def network_factory(cfg: TrainConfig):
-    """brax's PPO network factory with the config's layer sizes and tanh activations."""
+    """brax's PPO network factory with the config's layer sizes and tanh activations; with
+    `privileged_critic`, the value network reads the critic's own observation (`CriticObservation`)."""
     from brax.training.agents.ppo import networks as ppo_networks
 
+    keys = dict(value_obs_key=CRITIC_KEY) if cfg.privileged_critic else {}
     # CleanRL's actor: state-independent log std (starting at std 1 by default), a small output layer for the mean.
     return functools.partial(ppo_networks.make_ppo_networks, policy_hidden_layer_sizes=tuple(cfg.hidden),
                              value_hidden_layer_sizes=tuple(cfg.hidden), activation=linen.tanh,
                              distribution_type=cfg.policy_dist, noise_std_type="log", init_noise_std=cfg.init_noise_std,
                              mean_kernel_init_fn=jax.nn.initializers.variance_scaling,
                              mean_kernel_init_kwargs={"scale": cfg.mean_init_scale ** 2, "mode": "fan_in",
-                                                      "distribution": "uniform"})
+                                                      "distribution": "uniform"}, **keys)
 
 
 def make_networks(cfg: TrainConfig, env):
     """Networks as PPO trained them: observations normalized by the saved running statistics."""
     from brax.training.acme import running_statistics
 
-    return network_factory(cfg)(env.observation_size, env.action_size,
+    sizes = observation_sizes(cfg, env)
+    return network_factory(cfg)(sizes if cfg.privileged_critic else env.observation_size, env.action_size,
                                 preprocess_observations_fn=running_statistics.normalize)
 
 
 def init_params(cfg: TrainConfig, env):
-    """Fresh (normalizer, policy, value) params: the structure checkpoints restore into."""
+    """Fresh (normalizer, policy, value) params: the structure checkpoints restore into (with
+    `privileged_critic`, the normalizer holds statistics for each of `observation_sizes`)."""
     from brax.training.acme import running_statistics, specs
 
     nets = make_networks(cfg, env)
     key_policy, key_value = jax.random.split(jax.random.PRNGKey(cfg.seed))
-    normalizer = running_statistics.init_state(specs.Array((env.observation_size,), jp.dtype("float32")))
+    spec = {key: specs.Array(shape, jp.dtype("float32")) for key, shape in observation_sizes(cfg, env).items()}
+    normalizer = running_statistics.init_state(spec if cfg.privileged_critic else spec[POLICY_KEY])
     return normalizer, nets.policy_network.init(key_policy), nets.value_network.init(key_value)
 
 
@@ -80,10 +86,12 @@ def templates(cfg: TrainConfig, env):
 
 
 def policy_maker(cfg: TrainConfig, env):
-    """brax's `make_policy(params, deterministic)` for the config's networks."""
+    """brax's `make_policy(params, deterministic)` for the config's networks, on the policy's own
+    observation whatever the critic saw."""
     from brax.training.agents.ppo import networks as ppo_networks
 
-    return ppo_networks.make_inference_fn(make_networks(cfg, env))
+    make = ppo_networks.make_inference_fn(make_networks(dataclasses.replace(cfg, privileged_critic=False), env))
+    return lambda params, deterministic=False: make(actor_params(params), deterministic)
 
 
 def make_inference(cfg: TrainConfig, env, params, deterministic=True):
@@ -112,18 +120,19 @@ def evals_for(cfg: TrainConfig, remaining: int) -> int:
     return 1 + max(1, math.ceil((cfg.num_evals - 1) * remaining / cfg.num_timesteps))
 
 
-def wrap_env_fn(env, randomized: bool = False, track_returns: bool = False, failure_schedule: dict | None = None):
+def wrap_env_fn(env, randomized: bool = False, track_returns: bool = False, failure_schedule: dict | None = None,
+                critic_observation: bool = False):
     """brax's training wrappers, or ours that redraw the start state (and first goal) every episode,
     give each environment its own randomized model, keep each environment's latest return for the
-    progress line (`track_returns`), and schedule leg failures (`failure_schedule`,
-    hexa_mjx.mdp.failure_schedule)."""
+    progress line (`track_returns`), schedule leg failures (`failure_schedule`,
+    hexa_mjx.mdp.failure_schedule) and give the critic its own observation (`critic_observation`)."""
     from hexa_mjx.engines import wrappers
 
     fresh_starts = env.fresh_starts or randomized
-    if not track_returns and failure_schedule is None:
+    if not track_returns and failure_schedule is None and not critic_observation:
         return wrappers.wrap_for_training if fresh_starts else None
     return functools.partial(wrappers.wrap_for_training, track_returns=track_returns, fresh_starts=fresh_starts,
-                             failure_schedule=failure_schedule)
+                             failure_schedule=failure_schedule, critic_observation=critic_observation)
 
 
 def failure_schedule_for(cfg: TrainConfig, start_step: int) -> dict | None:
@@ -143,6 +152,16 @@ def program_description(cfg: TrainConfig, offset: int) -> dict:
     """What a run's environments, wrappers and networks are made from, as `program_store` keys its
     compiled programs: the config less its host-only fields, and the step its counts start from."""
     return {**{k: v for k, v in dataclasses.asdict(cfg).items() if k not in HOST_ONLY}, "offset": offset}
+
+
+def load_start(cfg: TrainConfig, env, template) -> tuple[int, object]:
+    """--init_from's (step, params) in the structure of `template`: a source trained without a
+    privileged critic gets one that starts as its own critic (`critic.with_critic`)."""
+    path = init_checkpoint(cfg)
+    if not cfg.privileged_critic or load_config(resolve_checkpoint(path)[0]).privileged_critic:
+        return load_checkpoint(path, template)
+    step, params = load_checkpoint(path, init_params(dataclasses.replace(cfg, privileged_critic=False), env))
+    return step, with_critic(params, template)
 
 
 def resume_point(cfg: TrainConfig, run_dir: Path, template, optimizer_template) -> tuple[int, object, object, object]:
@@ -189,7 +208,7 @@ def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
     if main:
         start_step, restore, optimizer, saved = resume_point(cfg, run_dir, template, optimizer_template)
         if restore is None and cfg.init_from:  # a fine-tuning run's own checkpoints come first on resume
-            source_step, restore = load_checkpoint(init_checkpoint(cfg), template)
+            source_step, restore = load_start(cfg, env, template)
             print(f"starting from the params of {cfg.init_from} (its step {source_step:,}); Adam starts afresh")
         # One row per evaluation: rows past the checkpoint go, and the checkpoint's own evaluation is
         # logged again only if its row is missing (a run from before rows were written first).
@@ -298,7 +317,8 @@ def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
                 ppo_settings(cfg, remaining, evals_for(cfg, remaining), cfg.seed + start_step, devices))
     ppo.train(env, settings, network_factory(cfg),
               # Returns are kept whether or not this process prints them: every process runs one program.
-              wrap_env_fn=wrap_env_fn(env, cfg.randomize, track_returns=True, failure_schedule=schedule),
+              wrap_env_fn=wrap_env_fn(env, cfg.randomize, track_returns=True, failure_schedule=schedule,
+                                      critic_observation=cfg.privileged_critic),
               randomization_fn=randomization_fn, restore_params=restore, restore_adam=optimizer,
               anneal_lr=(offset, cfg.num_timesteps) if cfg.anneal_lr else None,
               on_interval=on_interval, on_update=on_update, resume=position, environments=environments,

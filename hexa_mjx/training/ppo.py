@@ -162,7 +162,7 @@ def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=No
     # holds them), while XLA compiles the reset on a worker thread (tracing is Python: one core).
     reset = program_store.prepare(reset, (reset_keys,), "reset", programs)
     env_shapes = reset.out_info
-    obs_shape = env_shapes.obs.shape[2:]
+    obs_shape = jax.tree.map(lambda x: x.shape[2:], env_shapes.obs)  # {key: shape} where the critic has its own
     network = network_factory(obs_shape, env.action_size, preprocess_observations_fn=running_statistics.normalize)
     make_policy = ppo_networks.make_inference_fn(network)
     optimizer = make_optimizer(settings)
@@ -190,7 +190,8 @@ def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=No
         params = ppo_losses.PPONetworkParams(policy=network.policy_network.init(key_policy),
                                              value=network.value_network.init(key_value))
         return TrainingState(optimizer_state=optimizer.init(params), params=params,
-                             normalizer_params=running_statistics.init_state(specs.Array(obs_shape, jp.dtype("float32"))),
+                             normalizer_params=running_statistics.init_state(jax.tree.map(
+                                 lambda x: specs.Array(x.shape[2:], jp.dtype("float32")), env_shapes.obs)),
                              env_steps=types.UInt64(hi=0, lo=0))
 
     # One compiled program, the same bits as brax's eager init (tests/test_ppo.py): run eagerly,
