@@ -108,6 +108,10 @@ def test_a_run_with_a_privileged_critic_trains_from_a_plain_run_and_exports(trai
     expected = np.clip(np.asarray(jax.vmap(training.make_inference(cfg, env, params), in_axes=(0, None))(
         obs, jax.random.PRNGKey(0))), -1, 1)
     np.testing.assert_allclose(player.OnnxPolicy(out)(obs), expected, atol=1e-5, rtol=0)
+    # It goes on from its own checkpoint, critic and training environments included.
+    resumed = run("train.py", "--run_dir", str(run_dir), "--resume", "--num_timesteps", "128", env=cache_env)
+    assert "its environments carry on" in resumed.stdout
+    assert checkpoints.list_checkpoints(run_dir)[-1][0] == 128
     # A plain run cannot start from it: its critic has nowhere to go.
     with pytest.raises(config.ConfigError, match="privileged_critic True there"):
         config.validate(dataclasses.replace(cfg, privileged_critic=False, init_from=str(run_dir),
