@@ -142,7 +142,8 @@ def export(ckpt: str | Path, out: str | Path) -> Path:
     cfg = config.load_config(run_dir)
     env = config.make_env_for(cfg)
     step, params = checkpoints.load_checkpoint(ckpt_dir, training.init_params(cfg, env))
-    model = onnx_model(policy_arrays(cfg.policy_dist, critic.actor_params(params)), deployment_metadata(env, cfg, step, str(ckpt_dir)))
+    model = onnx_model(policy_arrays(cfg.policy_dist, critic.actor_params(params)),
+                       deployment_metadata(env, cfg, step, str(ckpt_dir)))
     atomic.write(out, model.SerializeToString())
     atomic.write(out.with_suffix(".json"), json.dumps(metadata_of(model), indent=1))
     return out
