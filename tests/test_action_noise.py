@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 
 from hexa_mjx.evaluation import action_noise
-from hexa_mjx.training import checkpoints, config, loop as training
+from hexa_mjx.training import checkpoints, config, networks
 
 
 def test_run_noise_reads_each_checkpoints_std(tmp_path, capsys):
     cfg = config.TrainConfig(hidden=[8, 8], init_noise_std=0.4)
     (tmp_path / "config.json").write_text(json.dumps(dataclasses.asdict(cfg)))
-    normalizer, policy, value = training.init_params(cfg, config.make_env_for(cfg))
+    normalizer, policy, value = networks.init_params(cfg, config.make_env_for(cfg))
     checkpoints.save_checkpoint(tmp_path, 100, (normalizer, policy, value))
     # A later checkpoint whose std PPO has moved: half of each joint's at the start.
     moved = jax.tree_util.tree_map_with_path(
@@ -31,4 +31,4 @@ def test_bad_input(tmp_path):
     assert action_noise.main([str(tmp_path)]) == 2  # no config.json
     cfg = config.TrainConfig(hidden=[8, 8], policy_dist="tanh_normal")
     with pytest.raises(ValueError, match="depends on the state"):
-        action_noise.action_noise_std(training.init_params(cfg, config.make_env_for(cfg)))
+        action_noise.action_noise_std(networks.init_params(cfg, config.make_env_for(cfg)))

@@ -7,12 +7,12 @@ import jax
 import numpy as np
 import pytest
 
-from hexa_mjx.training import checkpoints, config, optimizer_state, loop as training
+from hexa_mjx.training import checkpoints, config, networks, optimizer_state
 
 
 @pytest.fixture(scope="module")
 def template(env):
-    return training.init_params(config.TrainConfig(hidden=[8, 8]), env)
+    return networks.init_params(config.TrainConfig(hidden=[8, 8]), env)
 
 
 def save_two(run_dir, template):
@@ -60,7 +60,7 @@ def test_the_optimizer_state_round_trips_and_is_checked(template, env, tmp_path)
     jax.tree.map(np.testing.assert_array_equal, restored, adam)
     with pytest.raises(RuntimeError, match="does not fit"):  # another network's sizes
         checkpoints.load_optimizer(path, optimizer_state.adam_template(
-            training.init_params(config.TrainConfig(hidden=[4, 4]), env)))
+            networks.init_params(config.TrainConfig(hidden=[4, 4]), env)))
     (path / checkpoints.OPTIMIZER_FILE).write_bytes(b"damaged")
     with pytest.raises(RuntimeError, match="do not match the checksum"):
         checkpoints.load_checkpoint(path, template)

@@ -12,7 +12,7 @@ import numpy as np
 import optax
 import pytest
 
-from hexa_mjx.training import checkpoints, config, crash_points as faults, optimizer_state, ppo, loop as training
+from hexa_mjx.training import checkpoints, config, crash_points as faults, networks, optimizer_state, ppo
 from hexa_mjx.training.progress import TIMING_FIELDS
 
 from conftest import NOISE, TINY, run
@@ -61,7 +61,7 @@ def test_kills_at_chosen_moments_resume_with_every_row_once(tmp_path, cache_env)
     assert [s for s, _ in checkpoints.list_checkpoints(run_dir)] == [64, 128, 192, 256]
     assert not list((run_dir / "checkpoints").glob("tmp-*"))
     cfg = config.load_config(run_dir)
-    template = training.init_params(cfg, config.make_env_for(cfg))
+    template = networks.init_params(cfg, config.make_env_for(cfg))
     for step, path in checkpoints.list_checkpoints(run_dir):
         assert checkpoints.load_checkpoint(path, template)[0] == step
         adam = checkpoints.load_optimizer(path, optimizer_state.adam_template(template))
@@ -108,7 +108,7 @@ def assert_same_run(stopped, whole):
     run's, bit for bit."""
     assert comparable(stopped) == comparable(whole)  # every row, bit for bit
     cfg = config.load_config(whole)
-    template = training.init_params(cfg, config.make_env_for(cfg))
+    template = networks.init_params(cfg, config.make_env_for(cfg))
     (_, a), (_, b) = (checkpoints.load_checkpoint(checkpoints.list_checkpoints(r)[-1][1], template)
                       for r in (whole, stopped))
     for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)):

@@ -12,7 +12,7 @@ import pytest
 from conftest import TINY, run
 from hexa_mjx.deploy import export, player
 from hexa_mjx.engines import wrappers
-from hexa_mjx.training import checkpoints, config, critic, ppo, loop as training
+from hexa_mjx.training import checkpoints, config, critic, networks, ppo, loop as training
 
 # Leg 2 locked in every episode, observation noise on: the critic's observation must differ from
 # the policy's by the noise alone, and name the leg.
@@ -53,7 +53,7 @@ def test_same_params_as_brax_ppo_train_with_a_privileged_critic():
 
     env = config.make_env_for(PPO_CFG)
     settings = training.ppo_settings(PPO_CFG, num_timesteps=128, num_evals=2, seed=2, devices=1)
-    kwargs = dict(network_factory=training.network_factory(PPO_CFG),
+    kwargs = dict(network_factory=networks.network_factory(PPO_CFG),
                   wrap_env_fn=training.wrap_env_fn(env, critic_observation=True))
     params = ppo.train(env, settings, **kwargs)
     _, reference, _ = brax_ppo.train(environment=env, run_evals=False, num_eval_envs=2,
@@ -68,7 +68,7 @@ def test_a_start_without_the_critic_keeps_its_policy_and_its_values(env):
     flat_cfg = dataclasses.replace(FIXED, privileged_critic=False, obs_noise=0.0)
     rng = np.random.default_rng(0)
     n = env.observation_size
-    normalizer, policy, value = jax.tree.map(np.asarray, training.init_params(flat_cfg, env))
+    normalizer, policy, value = jax.tree.map(np.asarray, networks.init_params(flat_cfg, env))
     # Statistics as a trained run has them, not the fresh (0, 1).
     count = type(normalizer.count)(hi=np.uint32(0), lo=np.uint32(500))
     normalizer = normalizer.replace(count=count, mean=rng.normal(size=n).astype(np.float32),
@@ -76,19 +76,19 @@ def test_a_start_without_the_critic_keeps_its_policy_and_its_values(env):
                                     summed_variance=np.zeros(n, np.float32))
     normalizer = normalizer.replace(summed_variance=(500.0 * normalizer.std ** 2).astype(np.float32))
     value = jax.tree.map(lambda x: rng.normal(size=x.shape).astype(np.float32), value)
-    template, _ = training.templates(FIXED, env)
+    template, _ = networks.templates(FIXED, env)
     lifted = critic.with_critic((normalizer, policy, value), template)
     assert jax.tree.structure(lifted) == jax.tree.structure(template)
     obs = (normalizer.mean + normalizer.std * rng.normal(size=(16, n))).astype(np.float32)
     failures = rng.integers(0, 2, (16, 12)).astype(np.float32)
-    flat_nets, nets = training.make_networks(flat_cfg, env), training.make_networks(FIXED, env)
+    flat_nets, nets = networks.make_networks(flat_cfg, env), networks.make_networks(FIXED, env)
     before = flat_nets.value_network.apply(normalizer, value, obs)
     after = nets.value_network.apply(lifted[0], lifted[2], {"state": obs, "privileged_state": np.concatenate(
         [obs, failures], axis=1)})
     np.testing.assert_allclose(after, before, rtol=1e-5, atol=1e-5)
     key = jax.random.PRNGKey(0)
-    np.testing.assert_array_equal(training.make_inference(FIXED, env, lifted)(obs, key),
-                                  training.make_inference(flat_cfg, env, (normalizer, policy, value))(obs, key))
+    np.testing.assert_array_equal(networks.make_inference(FIXED, env, lifted)(obs, key),
+                                  networks.make_inference(flat_cfg, env, (normalizer, policy, value))(obs, key))
 
 
 def test_a_run_with_a_privileged_critic_trains_from_a_plain_run_and_exports(trained, tmp_path, cache_env):
@@ -100,12 +100,12 @@ def test_a_run_with_a_privileged_critic_trains_from_a_plain_run_and_exports(trai
     cfg = config.load_config(run_dir)
     env = config.make_env_for(cfg)
     step, params = checkpoints.load_checkpoint(checkpoints.list_checkpoints(run_dir)[-1][1],
-                                               training.init_params(cfg, env))
+                                               networks.init_params(cfg, env))
     assert step == 64 and set(params[0].mean) == {"state", "privileged_state"}
     out = export.export(run_dir, tmp_path / "p.onnx")
     assert export.read_metadata(out)["observation_size"] == env.observation_size
     obs = np.random.default_rng(2).normal(size=(8, env.observation_size)).astype(np.float32)
-    expected = np.clip(np.asarray(jax.vmap(training.make_inference(cfg, env, params), in_axes=(0, None))(
+    expected = np.clip(np.asarray(jax.vmap(networks.make_inference(cfg, env, params), in_axes=(0, None))(
         obs, jax.random.PRNGKey(0))), -1, 1)
     np.testing.assert_allclose(player.OnnxPolicy(out)(obs), expected, atol=1e-5, rtol=0)
     # It goes on from its own checkpoint, critic and training environments included.

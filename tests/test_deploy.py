@@ -11,7 +11,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from hexa_mjx.training import checkpoints, config, loop as training
+from hexa_mjx.training import checkpoints, config, networks
 from hexa_mjx.deploy import export, player
 from hexa_mjx.robot import constants as robot
 from hexa_mjx.studies.benchmark import gait_actions
@@ -36,7 +36,7 @@ def shipped():
     for name in SHIPPED:
         run_dir, ckpt = checkpoints.resolve_checkpoint(POLICIES / name)
         cfg = config.load_config(run_dir)
-        _, params = checkpoints.load_checkpoint(ckpt, training.init_params(cfg, config.make_env_for(cfg)))
+        _, params = checkpoints.load_checkpoint(ckpt, networks.init_params(cfg, config.make_env_for(cfg)))
         out[name] = (cfg, params, player.OnnxPolicy(POLICIES / f"{name}.onnx"))
     return out
 
@@ -63,7 +63,7 @@ def test_native_foot_stance_and_power():
 def test_onnx_matches_the_jax_policy(shipped, name):
     cfg, params, policy = shipped[name]
     env = config.make_env_for(cfg)
-    act = jax.jit(jax.vmap(training.make_inference(cfg, env, params), in_axes=(0, None)))
+    act = jax.jit(jax.vmap(networks.make_inference(cfg, env, params), in_axes=(0, None)))
     # 1,000 observations spread like the ones training saw (the normalizer's statistics).
     rng = np.random.default_rng(0)
     normalizer = params[0]
@@ -91,13 +91,13 @@ def test_export_writes_metadata_a_deployer_needs(tmp_path):
 
 def test_tanh_policy_and_deeper_networks_export(env):
     cfg = config.TrainConfig(hidden=[32, 16, 8], policy_dist="tanh_normal", mean_init_scale=1.0, seed=3)
-    params = training.init_params(cfg, env)
+    params = networks.init_params(cfg, env)
     model = export.onnx_model(export.policy_arrays(cfg.policy_dist, params), {"format": export.FORMAT})
     import onnxruntime as ort
 
     obs = np.random.default_rng(2).normal(size=(100, 52)).astype(np.float32)
     got = ort.InferenceSession(model.SerializeToString(), providers=["CPUExecutionProvider"]).run(None, {"obs": obs})[0]
-    expected = np.asarray(jax.vmap(training.make_inference(cfg, env, params), in_axes=(0, None))(obs, jax.random.PRNGKey(0)))
+    expected = np.asarray(jax.vmap(networks.make_inference(cfg, env, params), in_axes=(0, None))(obs, jax.random.PRNGKey(0)))
     np.testing.assert_allclose(got, expected, atol=1e-5, rtol=0)
 
 
@@ -144,7 +144,7 @@ def test_player_follows_the_mjx_rollout(env, step, state0, shipped):
     """Same start, same policy: the native trajectory matches MJX's closely for the first 0.25 s,
     and both reach the goal within 10 s; after that, contact events diverge (docs/RESULTS.md)."""
     cfg, params, policy = shipped["goal"]
-    act = jax.jit(training.make_inference(cfg, env, params))
+    act = jax.jit(networks.make_inference(cfg, env, params))
     native = player.env_for(policy)
     obs = native.reset(seed=0)
     np.testing.assert_allclose(obs, np.asarray(state0.obs), atol=1e-6)

@@ -6,7 +6,7 @@ import jax
 import numpy as np
 import pytest
 
-from hexa_mjx.training import config, ppo, loop as training
+from hexa_mjx.training import config, networks, ppo, loop as training
 
 # A tiny rollout (8 envs x 4 steps x 2 minibatches = 64 env steps per update), two intervals of two
 # updates, start noise drawn per episode (hexa_mjx's wrappers), two epochs of SGD, small networks.
@@ -18,7 +18,7 @@ CFG = config.TrainConfig(num_envs=8, batch_size=8, num_minibatches=2, unroll_len
 def settings():
     env = config.make_env_for(CFG)
     return env, training.ppo_settings(CFG, num_timesteps=192, num_evals=3, seed=5, devices=2), dict(
-        network_factory=training.network_factory(CFG), wrap_env_fn=training.wrap_env_fn(env))
+        network_factory=networks.network_factory(CFG), wrap_env_fn=training.wrap_env_fn(env))
 
 
 @pytest.fixture(scope="module")

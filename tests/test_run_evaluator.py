@@ -9,7 +9,7 @@ import pytest
 
 from hexa_mjx.evaluation.run_evaluator import RunEvaluator, brax_eval_key
 from hexa_mjx.mdp import randomization
-from hexa_mjx.training import config, loop
+from hexa_mjx.training import config, loop, networks
 
 EPISODES, LENGTH, SEED = 2, 20, 3
 
@@ -19,7 +19,7 @@ def setup():
     cfg = config.TrainConfig(hidden=[16, 16], episode_length=LENGTH, num_eval_envs=EPISODES, randomize=True,
                              start_joint_noise=0.1)
     env = config.make_env_for(cfg)
-    params = loop.init_params(cfg, env)
+    params = networks.init_params(cfg, env)
     # Params a little away from the fresh ones, so that the policy's actions differ between observations.
     params = jax.tree.map(lambda x: x + 0.05 * np.cos(np.arange(np.size(x)).reshape(np.shape(x))), params)
     return cfg, env, params
@@ -32,7 +32,7 @@ def brax_figures(cfg, env, params, calls: int) -> list[dict]:
     wrapped = loop.wrap_env_fn(env, randomized=True)(
         env, episode_length=LENGTH, action_repeat=1,
         randomization_fn=functools.partial(randomization.randomization_fn(env), rng=jax.random.split(key, EPISODES)))
-    evaluator = acting.Evaluator(wrapped, functools.partial(loop.policy_maker(cfg, env), deterministic=True),
+    evaluator = acting.Evaluator(wrapped, functools.partial(networks.policy_maker(cfg, env), deterministic=True),
                                  num_eval_envs=EPISODES, episode_length=LENGTH, action_repeat=1, key=key)
     return [evaluator.run_evaluation(params, training_metrics={}) for _ in range(calls)]
 
@@ -40,7 +40,7 @@ def brax_figures(cfg, env, params, calls: int) -> list[dict]:
 def test_the_same_figures_as_brax_evaluator(setup):
     cfg, env, params = setup
     ours = RunEvaluator(env, loop.wrap_env_fn(env, randomized=True), randomization.randomization_fn(env),
-                        loop.policy_maker(cfg, env), params, EPISODES, LENGTH, seed=SEED)
+                        networks.policy_maker(cfg, env), params, EPISODES, LENGTH, seed=SEED)
     mine = [ours(params) for _ in range(2)]
     theirs = brax_figures(cfg, env, params, 2)
     for a, b in zip(mine, theirs):
@@ -52,6 +52,6 @@ def test_the_same_figures_as_brax_evaluator(setup):
         assert a["eval/episode_reward"] == pytest.approx(float(b["eval/episode_reward"]), rel=1e-3)
     assert mine[0]["eval/episode_reward"] != pytest.approx(mine[1]["eval/episode_reward"], rel=1e-6)  # new episodes
     # An exact resume after one evaluation continues with the second one's key.
-    resumed = RunEvaluator(env, loop.wrap_env_fn(env), None, loop.policy_maker(cfg, env), params, EPISODES, LENGTH,
+    resumed = RunEvaluator(env, loop.wrap_env_fn(env), None, networks.policy_maker(cfg, env), params, EPISODES, LENGTH,
                            seed=SEED, done=1)
     assert np.array_equal(resumed.key, jax.random.split(brax_eval_key(SEED))[0])

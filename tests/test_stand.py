@@ -18,7 +18,7 @@ from hexa_mjx.evaluation import evaluate
 from hexa_mjx.robot import constants as robot
 from hexa_mjx.robot.kinematics import yaw
 from hexa_mjx.tasks import stand
-from hexa_mjx.training import checkpoints, config, loop as training
+from hexa_mjx.training import checkpoints, config, networks
 
 
 @pytest.fixture(scope="module")
@@ -87,7 +87,7 @@ def stand_run(tmp_path_factory):
                                              "--num_envs", "8", "--batch_size", "8", "--num_minibatches", "1",
                                              "--cpu_devices", "1", "--run_dir", str(run_dir)]))
     (run_dir / "config.json").write_text(json.dumps(dataclasses.asdict(cfg)))
-    checkpoints.save_checkpoint(run_dir, 0, training.init_params(cfg, config.make_env_for(cfg)))
+    checkpoints.save_checkpoint(run_dir, 0, networks.init_params(cfg, config.make_env_for(cfg)))
     return run_dir
 
 

@@ -14,7 +14,7 @@ import jax
 import numpy as np
 import pytest
 
-from hexa_mjx.training import checkpoints, config, loop as training
+from hexa_mjx.training import checkpoints, config, networks, loop as training
 from hexa_mjx.evaluation import evaluate as evaluation, video
 from hexa_mjx.evaluation import table
 from hexa_mjx.tasks import TASKS
@@ -78,7 +78,7 @@ def test_init_from_fine_tunes_from_another_runs_params(trained, tmp_path, cache_
     assert announced == sorted(announced), proc.stdout
     cfg = config.load_config(run_dir)
     env = config.make_env_for(cfg)
-    template = training.init_params(cfg, env)
+    template = networks.init_params(cfg, env)
     _, before, _, _ = checkpoints.load_latest(source, template)
     _, after, _, _ = checkpoints.load_latest(run_dir, template)
     # The observation normalizer's sample count (brax's UInt64: hi and lo words) carries on from the
@@ -115,20 +115,20 @@ def test_resumed_run_keeps_its_evaluation_spacing():
 def test_checkpoint_restores_same_actions(tmp_path):
     cfg = config.TrainConfig(hidden=[32, 32])
     env = config.make_env_for(cfg)
-    normalizer, policy, value = training.init_params(cfg, env)
+    normalizer, policy, value = networks.init_params(cfg, env)
     key = jax.random.PRNGKey(7)
     # Non-trivial normalizer statistics, so a normalizer lost in saving would change the actions.
     normalizer = normalizer.replace(mean=jax.random.normal(key, normalizer.mean.shape),
                                     std=1 + jax.random.uniform(key, normalizer.std.shape))
     params = (normalizer, policy, value)
     obs = jax.random.normal(jax.random.PRNGKey(1), (5, env.observation_size))
-    before = training.make_inference(cfg, env, params)(obs, key)
+    before = networks.make_inference(cfg, env, params)(obs, key)
     path = checkpoints.save_checkpoint(tmp_path, 1234, params)
-    step, restored = checkpoints.load_checkpoint(path, training.init_params(cfg, env))
-    after = training.make_inference(cfg, env, restored)(obs, key)
+    step, restored = checkpoints.load_checkpoint(path, networks.init_params(cfg, env))
+    after = networks.make_inference(cfg, env, restored)(obs, key)
     assert step == 1234
     np.testing.assert_array_equal(np.asarray(before), np.asarray(after))
-    fresh = training.make_inference(cfg, env, training.init_params(dataclasses.replace(cfg, seed=1), env))(obs, key)
+    fresh = networks.make_inference(cfg, env, networks.init_params(dataclasses.replace(cfg, seed=1), env))(obs, key)
     assert not np.allclose(before, fresh)  # the comparison can tell different params apart
 
 
@@ -136,10 +136,10 @@ def test_checkpoint_restores_same_actions(tmp_path):
 def test_init_noise_std_sets_the_untrained_policys_action_noise(noise_std):
     cfg = config.TrainConfig(hidden=[8, 8], init_noise_std=noise_std)
     env = config.make_env_for(cfg)
-    params = training.init_params(cfg, env)
+    params = networks.init_params(cfg, env)
     obs = jax.numpy.zeros((4096, env.observation_size))
-    mean = training.make_inference(cfg, env, params)(obs, jax.random.PRNGKey(0))
-    sampled = training.make_inference(cfg, env, params, deterministic=False)(obs, jax.random.PRNGKey(1))
+    mean = networks.make_inference(cfg, env, params)(obs, jax.random.PRNGKey(0))
+    sampled = networks.make_inference(cfg, env, params, deterministic=False)(obs, jax.random.PRNGKey(1))
     np.testing.assert_allclose(np.std(np.asarray(sampled - mean)), noise_std, rtol=0.03)
 
 

@@ -260,14 +260,14 @@ def velocity_onnx(tmp_path_factory):
     import dataclasses
 
     from hexa_mjx.deploy import export
-    from hexa_mjx.training import checkpoints, config, loop as training
+    from hexa_mjx.training import checkpoints, config, networks
 
     run_dir = tmp_path_factory.mktemp("velocity") / "run"
     cfg = config.validate(config.parse_args(["--task", "velocity", "--hidden", "8", "8", "--episode_length", "90",
                                              "--num_envs", "8", "--batch_size", "8", "--num_minibatches", "1",
                                              "--cpu_devices", "1", "--run_dir", str(run_dir)]))
     (run_dir / "config.json").write_text(json.dumps(dataclasses.asdict(cfg)))
-    checkpoints.save_checkpoint(run_dir, 0, training.init_params(cfg, config.make_env_for(cfg)))
+    checkpoints.save_checkpoint(run_dir, 0, networks.init_params(cfg, config.make_env_for(cfg)))
     return run_dir, export.export(run_dir, run_dir.parent / "velocity.onnx")
 
 

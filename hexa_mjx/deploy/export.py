@@ -132,7 +132,7 @@ def metadata_of(model) -> dict:
 
 def export(ckpt: str | Path, out: str | Path) -> Path:
     """Write the ONNX file (and `<out>.json` metadata) of a run's latest checkpoint or one checkpoint."""
-    from hexa_mjx.training import checkpoints, config, critic, loop as training
+    from hexa_mjx.training import checkpoints, config, critic, networks
 
     out = Path(out)
     if out.suffix != ".onnx" or out.is_dir():
@@ -141,7 +141,7 @@ def export(ckpt: str | Path, out: str | Path) -> Path:
     run_dir, ckpt_dir = checkpoints.resolve_checkpoint(Path(ckpt))
     cfg = config.load_config(run_dir)
     env = config.make_env_for(cfg)
-    step, params = checkpoints.load_checkpoint(ckpt_dir, training.init_params(cfg, env))
+    step, params = checkpoints.load_checkpoint(ckpt_dir, networks.init_params(cfg, env))
     model = onnx_model(policy_arrays(cfg.policy_dist, critic.actor_params(params)),
                        deployment_metadata(env, cfg, step, str(ckpt_dir)))
     atomic.write(out, model.SerializeToString())

@@ -106,7 +106,8 @@ class CriticObservation(Wrapper):
     def __init__(self, env):
         super().__init__(env)
         base = env.unwrapped
-        self._observe = jax.vmap(base.observe)
+        # Without observation noise the policy's observation is already the clean one.
+        self._observe = jax.vmap(base.observe) if base.config.obs_noise else None
         # Where the failure mode is not "mixed", every failed leg fails the same way.
         self._locked = 1.0 if base.config.failure_mode == "locked" else 0.0
 
@@ -118,7 +119,8 @@ class CriticObservation(Wrapper):
     def _split(self, state: State) -> State:
         failed = state.info["failed_legs"]
         locked = state.info.get("failure_locked", jp.full(failed.shape[:-1], self._locked))
-        critic = jp.concatenate([self._observe(state.pipeline_state),
+        clean = self._observe(state.pipeline_state) if self._observe else state.obs
+        critic = jp.concatenate([clean,
                                  failure_observation(failed, locked[..., None].astype(failed.dtype))], axis=-1)
         return state.replace(obs={POLICY_KEY: state.obs, CRITIC_KEY: critic})
 

@@ -3,7 +3,7 @@
     python -m hexa_mjx.evaluation.action_noise runs/goal_directed-s0 [more run directories]
 
 The actor's std is one learned parameter per joint, independent of the state (CleanRL's actor,
-hexa_mjx.training.loop.network_factory); it starts at --init_noise_std and PPO moves it. Evaluation
+hexa_mjx.training.networks.network_factory); it starts at --init_noise_std and PPO moves it. Evaluation
 uses the mean action, but training rolls out with this noise (docs/RESULTS.md, "The fast preset's finish").
 """
 
@@ -28,10 +28,10 @@ def action_noise_std(params) -> np.ndarray:
 
 def run_noise(run_dir: Path) -> list[tuple[int, float]]:
     """(step, mean std over actions) of every complete checkpoint of `run_dir`, oldest first."""
-    from hexa_mjx.training import checkpoints, config, loop as training
+    from hexa_mjx.training import checkpoints, config, networks
 
     cfg = config.load_config(run_dir)
-    template = training.init_params(cfg, config.make_env_for(cfg))
+    template = networks.init_params(cfg, config.make_env_for(cfg))
     return [(step, float(action_noise_std(checkpoints.load_checkpoint(path, template)[1]).mean()))
             for step, path in checkpoints.list_checkpoints(run_dir)]
 

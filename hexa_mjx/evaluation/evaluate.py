@@ -15,7 +15,7 @@ import numpy as np
 
 from brax.envs.wrappers import training as brax_training
 
-from hexa_mjx.training import checkpoints, config, loop as training
+from hexa_mjx.training import checkpoints, config, networks
 from hexa_mjx.evaluation import gait, plots
 from hexa_mjx.mdp import randomization
 from hexa_mjx.engines import wrappers
@@ -223,8 +223,8 @@ def evaluate(ckpt: str | Path, episodes: int = 128, videos: int = 1, out: str | 
     env = config.make_env_for(cfg, task=task or "", **overrides)
     out = Path(out) if out else run_dir / "eval"
     check_writable(out)
-    step, params = checkpoints.load_checkpoint(ckpt_dir, training.init_params(cfg, env))
-    policy = training.make_inference(cfg, env, params, deterministic=True)
+    step, params = checkpoints.load_checkpoint(ckpt_dir, networks.init_params(cfg, env))
+    policy = networks.make_inference(cfg, env, params, deterministic=True)
     clock = [time.perf_counter()]  # where eval.py's time goes: rollout (compiling included), figures, plots, video
     start, traj = rollout(env, policy, episodes, seed, ranges=randomization.Ranges() if randomize else None)
     clock.append(time.perf_counter())

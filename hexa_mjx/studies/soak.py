@@ -135,7 +135,7 @@ def soak_kills(kills: int, terms: int, train_args: list[str], out: Path, seed: i
     times, resumed after each; see the module doc."""
     import jax
 
-    from hexa_mjx.training import checkpoints, config, optimizer_state, loop as training
+    from hexa_mjx.training import checkpoints, config, networks, optimizer_state
     from hexa_mjx.training.progress import TIMING_FIELDS
     from hexa_mjx.training.resume import EXIT_CODE
 
@@ -187,7 +187,7 @@ def soak_kills(kills: int, terms: int, train_args: list[str], out: Path, seed: i
     killed_s = time.time() - t0
 
     cfg = config.load_config(whole)
-    template = training.init_params(cfg, config.make_env_for(cfg))
+    template = networks.init_params(cfg, config.make_env_for(cfg))
     adam_template = optimizer_state.adam_template(template)
     unreadable, adam_counts_continue = [], True
     per_update = cfg.update_epochs * cfg.num_minibatches  # Adam steps per PPO update

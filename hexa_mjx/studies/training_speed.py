@@ -19,13 +19,13 @@ from hexa_mjx.training import config
 def train_speed(num_envs: int = 256, updates: int = 4, devices: int = 1, **overrides) -> dict:
     """End-to-end PPO env steps/s (train.py's settings, no evaluations) and compile time on `devices`.
     Three training epochs of `updates` updates: the first compiles, the last is timed."""
-    from hexa_mjx.training import ppo, loop as training
+    from hexa_mjx.training import networks, ppo, loop as training
 
     cfg = config.TrainConfig(num_envs=num_envs, **overrides)
     env = config.make_env_for(cfg)
     marks = [(0, time.perf_counter())]
     ppo.train(env, training.ppo_settings(cfg, 3 * updates * cfg.steps_per_update, 4, cfg.seed, devices),
-              training.network_factory(cfg), wrap_env_fn=training.wrap_env_fn(env),
+              networks.network_factory(cfg), wrap_env_fn=training.wrap_env_fn(env),
               on_interval=lambda step, *_: marks.append((step, time.perf_counter())) if step else None)
     (s1, t1), (s2, t2) = marks[-2:]
     epoch_s = t2 - t1
@@ -50,7 +50,7 @@ def training_profile(num_envs: int = 256, repeats: int = 3, **overrides) -> dict
     from brax.training.agents.ppo import losses as ppo_losses
     from brax.training.agents.ppo import networks as ppo_networks
 
-    from hexa_mjx.training import loop as training, ppo
+    from hexa_mjx.training import loop as training, networks, ppo
 
     cfg = config.TrainConfig(num_envs=num_envs, **overrides)
     env = config.make_env_for(cfg)
@@ -67,8 +67,8 @@ def training_profile(num_envs: int = 256, repeats: int = 3, **overrides) -> dict
     # (hexa_mjx.training.ppo), on one device under pmap as training runs them.
     settings = training.ppo_settings(cfg, cfg.steps_per_update, 2, cfg.seed, devices=1)
     wrapped = envs.training.wrap(env, episode_length=cfg.episode_length)
-    nets = training.make_networks(cfg, env)
-    normalizer, policy_params, value_params = training.init_params(cfg, env)
+    nets = networks.make_networks(cfg, env)
+    normalizer, policy_params, value_params = networks.init_params(cfg, env)
     params = ppo_losses.PPONetworkParams(policy=policy_params, value=value_params)
     rollout = ppo.rollout_fn(wrapped, ppo_networks.make_inference_fn(nets), settings)
     optimizer = ppo.make_optimizer(settings)

@@ -1,8 +1,9 @@
-"""Brax PPO over the hexapod environment: networks, policy loading, and the training run.
+"""Brax PPO over the hexapod environment: the training run, its start and its evaluations.
 
 `train.py` is the command-line face of `train(config)`. A run directory holds `config.json`,
 `metrics.jsonl` (one row per evaluation), TensorBoard events in `tb/` and `checkpoints/<step>/`;
-see `hexa_mjx.training.config`, `hexa_mjx.training.checkpoints` and `hexa_mjx.training.progress`.
+see `hexa_mjx.training.config`, `hexa_mjx.training.checkpoints` and `hexa_mjx.training.progress`;
+the networks are `hexa_mjx.training.networks`'s.
 """
 
 from __future__ import annotations
@@ -17,8 +18,6 @@ from pathlib import Path
 
 import jax
 import jax.numpy as jp
-import numpy as np
-from flax import linen
 
 from hexa_mjx.training import distributed, crash_points as faults, ppo, resume as exact, selection
 from hexa_mjx.mdp import randomization
@@ -28,76 +27,13 @@ from hexa_mjx.training.config import TrainConfig, init_checkpoint, load_config, 
 from hexa_mjx.mdp.curriculum import level_summary
 from hexa_mjx.mdp.failure_schedule import schedule_summary
 from hexa_mjx.training.jax_setup import devices_for, prepare_jax
-from hexa_mjx.training.optimizer_state import adam_template
 from hexa_mjx.training.progress import Logger, keep_rows_up_to
 from hexa_mjx.training.run_lock import RunLock
 from hexa_mjx.evaluation.run_evaluator import RunEvaluator
-from hexa_mjx.engines.wrappers import CRITIC_KEY, POLICY_KEY, mean_last_return
-from hexa_mjx.training.critic import actor_params, observation_sizes, with_critic
+from hexa_mjx.engines.wrappers import mean_last_return
+from hexa_mjx.training.critic import with_critic
+from hexa_mjx.training.networks import init_params, network_factory, policy_maker, templates
 from hexa_mjx import atomic
-
-
-def network_factory(cfg: TrainConfig):
-    """brax's PPO network factory with the config's layer sizes and tanh activations; with
-    `privileged_critic`, the value network reads the critic's own observation (`CriticObservation`)."""
-    from brax.training.agents.ppo import networks as ppo_networks
-
-    keys = dict(value_obs_key=CRITIC_KEY) if cfg.privileged_critic else {}
-    # CleanRL's actor: state-independent log std (starting at std 1 by default), a small output layer for the mean.
-    return functools.partial(ppo_networks.make_ppo_networks, policy_hidden_layer_sizes=tuple(cfg.hidden),
-                             value_hidden_layer_sizes=tuple(cfg.hidden), activation=linen.tanh,
-                             distribution_type=cfg.policy_dist, noise_std_type="log", init_noise_std=cfg.init_noise_std,
-                             mean_kernel_init_fn=jax.nn.initializers.variance_scaling,
-                             mean_kernel_init_kwargs={"scale": cfg.mean_init_scale ** 2, "mode": "fan_in",
-                                                      "distribution": "uniform"}, **keys)
-
-
-def make_networks(cfg: TrainConfig, env):
-    """Networks as PPO trained them: observations normalized by the saved running statistics."""
-    from brax.training.acme import running_statistics
-
-    sizes = observation_sizes(cfg, env)
-    return network_factory(cfg)(sizes if cfg.privileged_critic else env.observation_size, env.action_size,
-                                preprocess_observations_fn=running_statistics.normalize)
-
-
-def init_params(cfg: TrainConfig, env):
-    """Fresh (normalizer, policy, value) params: the structure checkpoints restore into (with
-    `privileged_critic`, the normalizer holds statistics for each of `observation_sizes`)."""
-    from brax.training.acme import running_statistics, specs
-
-    nets = make_networks(cfg, env)
-    key_policy, key_value = jax.random.split(jax.random.PRNGKey(cfg.seed))
-    spec = {key: specs.Array(shape, jp.dtype("float32")) for key, shape in observation_sizes(cfg, env).items()}
-    normalizer = running_statistics.init_state(spec if cfg.privileged_critic else spec[POLICY_KEY])
-    return normalizer, nets.policy_network.init(key_policy), nets.value_network.init(key_value)
-
-
-def templates(cfg: TrainConfig, env):
-    """(params, Adam state) shaped as a run of `cfg` holds them, as NumPy zeros: what checkpoints
-    restore into and programs are compiled for. Made from shapes alone: run, their few dozen
-    operations would each compile on its own (about 1.5 s on a 2-core CPU)."""
-
-    def made():
-        params = init_params(cfg, env)
-        return params, adam_template(params)
-
-    return jax.tree.map(lambda x: np.zeros(x.shape, x.dtype), jax.eval_shape(made))
-
-
-def policy_maker(cfg: TrainConfig, env):
-    """brax's `make_policy(params, deterministic)` for the config's networks, on the policy's own
-    observation whatever the critic saw."""
-    from brax.training.agents.ppo import networks as ppo_networks
-
-    make = ppo_networks.make_inference_fn(make_networks(dataclasses.replace(cfg, privileged_critic=False), env))
-    return lambda params, deterministic=False: make(actor_params(params), deterministic)
-
-
-def make_inference(cfg: TrainConfig, env, params, deterministic=True):
-    """A policy function obs -> action from saved params."""
-    policy = policy_maker(cfg, env)(params, deterministic=deterministic)
-    return lambda obs, key: policy(obs, key)[0]
 
 
 def ppo_settings(cfg: TrainConfig, num_timesteps: int, num_evals: int, seed: int,
