@@ -18,13 +18,12 @@ import numpy as np
 from hexa_mjx.engines.wrappers import CRITIC_KEY, POLICY_KEY, CriticObservation
 
 
-def observation_sizes(cfg, env) -> dict:
-    """What the networks read, {key: shape}: the policy's observation, and with `privileged_critic`
-    the critic's."""
-    sizes = {POLICY_KEY: (env.observation_size,)}
-    if cfg.privileged_critic:
-        sizes[CRITIC_KEY] = (CriticObservation.critic_size(env),)
-    return sizes
+def observation_shapes(cfg, env):
+    """What the networks read, as brax's PPO networks take it: the policy observation's length, or
+    with `privileged_critic` {key: shape} for the policy's observation and the critic's."""
+    if not cfg.privileged_critic:
+        return env.observation_size
+    return {POLICY_KEY: (env.observation_size,), CRITIC_KEY: (CriticObservation.critic_size(env),)}
 
 
 def actor_params(params):

@@ -15,9 +15,9 @@ import jax.numpy as jp
 import numpy as np
 from flax import linen
 
-from hexa_mjx.engines.wrappers import CRITIC_KEY, POLICY_KEY
+from hexa_mjx.engines.wrappers import CRITIC_KEY
 from hexa_mjx.training.config import TrainConfig
-from hexa_mjx.training.critic import actor_params, observation_sizes
+from hexa_mjx.training.critic import actor_params, observation_shapes
 from hexa_mjx.training.optimizer_state import adam_template
 
 
@@ -40,20 +40,21 @@ def make_networks(cfg: TrainConfig, env):
     """Networks as PPO trained them: observations normalized by the saved running statistics."""
     from brax.training.acme import running_statistics
 
-    sizes = observation_sizes(cfg, env)
-    return network_factory(cfg)(sizes if cfg.privileged_critic else env.observation_size, env.action_size,
+    return network_factory(cfg)(observation_shapes(cfg, env), env.action_size,
                                 preprocess_observations_fn=running_statistics.normalize)
 
 
 def init_params(cfg: TrainConfig, env):
     """Fresh (normalizer, policy, value) params: the structure checkpoints restore into (with
-    `privileged_critic`, the normalizer holds statistics for each of `observation_sizes`)."""
+    `privileged_critic`, the normalizer holds statistics for each of `observation_shapes`)."""
     from brax.training.acme import running_statistics, specs
 
     nets = make_networks(cfg, env)
     key_policy, key_value = jax.random.split(jax.random.PRNGKey(cfg.seed))
-    spec = {key: specs.Array(shape, jp.dtype("float32")) for key, shape in observation_sizes(cfg, env).items()}
-    normalizer = running_statistics.init_state(spec if cfg.privileged_critic else spec[POLICY_KEY])
+    shapes = observation_shapes(cfg, env)
+    spec = jax.tree.map(lambda shape: specs.Array(shape, jp.dtype("float32")),
+                        shapes if isinstance(shapes, dict) else (shapes,), is_leaf=lambda x: isinstance(x, tuple))
+    normalizer = running_statistics.init_state(spec)
     return normalizer, nets.policy_network.init(key_policy), nets.value_network.init(key_value)
 
 
