@@ -52,8 +52,8 @@ def init_params(cfg: TrainConfig, env):
     nets = make_networks(cfg, env)
     key_policy, key_value = jax.random.split(jax.random.PRNGKey(cfg.seed))
     shapes = observation_shapes(cfg, env)
-    spec = jax.tree.map(lambda shape: specs.Array(shape, jp.dtype("float32")),
-                        shapes if isinstance(shapes, dict) else (shapes,), is_leaf=lambda x: isinstance(x, tuple))
+    as_spec = lambda shape: specs.Array(shape, jp.dtype("float32"))  # noqa: E731
+    spec = {key: as_spec(shape) for key, shape in shapes.items()} if isinstance(shapes, dict) else as_spec((shapes,))
     normalizer = running_statistics.init_state(spec)
     return normalizer, nets.policy_network.init(key_policy), nets.value_network.init(key_value)
 
