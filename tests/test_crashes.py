@@ -12,7 +12,7 @@ import numpy as np
 import optax
 import pytest
 
-from hexa_mjx.training import checkpoints, config, crash_points as faults, networks, optimizer_state, ppo
+from hexa_mjx.training import checkpoints, config, crash_points as faults, networks, optimizer_state
 from hexa_mjx.training.progress import TIMING_FIELDS
 
 from conftest import NOISE, TINY, run
@@ -71,7 +71,7 @@ def test_kills_at_chosen_moments_resume_with_every_row_once(tmp_path, cache_env)
 
 def test_a_restored_adam_continues_as_the_uninterrupted_one():
     """PPO's optimizer (Adam after gradient clipping), restored mid-run from the Adam state a
-    checkpoint keeps (`ppo.adam_of`, as host arrays), takes the same steps as an uninterrupted one."""
+    checkpoint keeps (`optimizer_state.adam_of`, as host arrays), takes the same steps as an uninterrupted one."""
     grad = lambda p, i: jax.tree.map(lambda x: jax.numpy.sin(x * (i + 1)), p)  # noqa: E731
     params = {"w": jax.numpy.arange(6.0).reshape(2, 3), "b": jax.numpy.ones(3)}
     opt = optax.chain(optax.clip_by_global_norm(1.0), optax.adam(learning_rate=0.1))
@@ -85,9 +85,9 @@ def test_a_restored_adam_continues_as_the_uninterrupted_one():
 
     whole, _ = run_adam(params, opt.init(params), 0, 8)
     half, state = run_adam(params, opt.init(params), 0, 4)
-    saved = jax.tree.map(np.asarray, ppo.adam_of(state))
+    saved = jax.tree.map(np.asarray, optimizer_state.adam_of(state))
     assert int(saved[0].count) == 4
-    resumed, _ = run_adam(half, ppo.with_adam(opt.init(half), saved), 4, 8)
+    resumed, _ = run_adam(half, optimizer_state.with_adam(opt.init(half), saved), 4, 8)
     jax.tree.map(np.testing.assert_array_equal, resumed, whole)
     fresh, _ = run_adam(half, opt.init(half), 4, 8)  # Adam started afresh on resume
     assert not np.allclose(fresh["w"], whole["w"])

@@ -192,3 +192,32 @@ def test_seed_summary_of_generalist_batteries(tmp_path, capsys):
     evaluation.write_text(json.dumps({"summary": {"success_rate": 1.0}}))
     with pytest.raises(SystemExit):
         seed_summary.main(["--battery", str(files[0]), str(evaluation)])
+
+
+def test_seed_summary_of_leg_failure_sweeps(tmp_path, capsys):
+    from hexa_mjx.studies import seed_summary
+
+    # Three seeds: with leg 1 failed, one meets the target (90% at 70%), one misses on success and one
+    # on speed; with legs 1 and 6, one misses 75% success. Intact has no target.
+    files = []
+    for seed, (leg, share, pair) in enumerate([(0.95, 0.80, 0.80), (0.85, 0.75, 0.70), (1.0, 0.65, 0.90)]):
+        rows = [{"failed_legs": [], "success_rate": 1.0, "speed_share_of_intact": 1.0},
+                {"failed_legs": [1], "success_rate": leg, "speed_share_of_intact": share},
+                {"failed_legs": [1, 6], "success_rate": pair, "speed_share_of_intact": None}]
+        (tmp_path / f"legfail-s{seed}").mkdir()
+        files.append(tmp_path / f"legfail-s{seed}" / "sweep.json")
+        files[-1].write_text(json.dumps(rows))
+    seed_summary.main(["--legs", *map(str, files)])
+    out = capsys.readouterr().out
+    assert "| 1 | 95% / 80.0% | 85% / 75.0%* | 100% / 65.0%* | 95%, 90 to 98%, 85% | 75%, 70 to 78%, 65% | 1 of 3 |" in out
+    assert "| 1 + 6 | 80% / - | 70% / -* | 90% / - | 80%, 75 to 85%, 70% | - | 2 of 3 |" in out
+    assert "| none | " in out and "0 of 2 failures met by every seed" in out
+    other = tmp_path / "other.json"  # a sweep of other legs
+    other.write_text(json.dumps([{"failed_legs": [2], "success_rate": 1.0}] * 3))
+    with pytest.raises(SystemExit):
+        seed_summary.main(["--legs", str(files[0]), str(other)])
+    battery = tmp_path / "battery.json"  # a generalist battery is not a sweep
+    battery.write_text(json.dumps([{"condition": "leg 1 limp", "path_completed_rate": 1.0, "meets_target": True}]))
+    for wrong in (["--legs", str(files[0]), str(battery)], ["--legs", "--battery", str(files[0])]):
+        with pytest.raises(SystemExit):
+            seed_summary.main(wrong)

@@ -4,11 +4,15 @@ interquartile range and the worst seed (rliable's way of reporting few runs: Aga
     python -m hexa_mjx.studies.seed_summary runs/velocity-s*/eval256/metrics.json
     python -m hexa_mjx.studies.seed_summary runs/velocity-s*/native.json --json summary.json
     python -m hexa_mjx.studies.seed_summary --battery runs/gen-s*/battery-mjx.json
+    python -m hexa_mjx.studies.seed_summary --legs runs/legfail-s*/sweep-leg.json
 
 Reads eval.py's metrics.json and play.py's --json files alike; a figure one of them lacks is "-".
 With --battery, the files are the generalist battery's (`hexa_mjx.studies.generalist --json`), and
 the table has one row per condition: each seed's path completion, the median, IQR and worst, and
-how many seeds meet the condition's target.
+how many seeds meet the condition's target. With --legs, they are leg-failure sweeps
+(`hexa_mjx.studies.leg_failure_sweep --out`): one row per set of failed legs, each seed's success
+and share of its intact speed, and how many seeds meet the generalist battery's target for one or
+two failed legs.
 """
 
 from __future__ import annotations
@@ -120,6 +124,57 @@ def battery_table(labels: list[str], batteries: list[list[dict]]) -> str:
     return "\n".join(lines)
 
 
+def _percentiles(values: np.ndarray) -> tuple[float, float, float]:
+    return tuple(np.nanpercentile(values, [25, 50, 75])) if np.isfinite(values).any() else (math.nan,) * 3
+
+
+def sweep_table(labels: list[str], sweeps: list[list[dict]]) -> str:
+    """Markdown: one row per set of failed legs in leg-failure sweeps (hexa_mjx.studies.leg_failure_sweep),
+    each seed's success and share of its intact speed (`*`: that seed misses the target, the
+    generalist battery's for one or two failed legs), the median, IQR and worst of each, and the
+    seeds that meet the target; last, the failures every seed meets."""
+    from hexa_mjx.studies.generalist import TARGETS
+
+    conditions = [tuple(r["failed_legs"]) for r in sweeps[0]]
+    for label, rows in zip(labels, sweeps):
+        if [tuple(r["failed_legs"]) for r in rows] != conditions:
+            raise ValueError(f"{label} failed other legs than {labels[0]}: give sweeps of the same conditions")
+    lines = ["| failed legs | " + " | ".join(labels) + " | success: median, IQR, worst | "
+             "share of intact speed: median, IQR, worst | seeds meeting its target |",
+             "|---" * (len(labels) + 4) + "|"]
+    every = failures = 0
+    for i, legs in enumerate(conditions):
+        rows = [rows[i] for rows in sweeps]
+        success = np.array([100.0 * r["success_rate"] for r in rows])
+        share = np.array([math.nan if r.get("speed_share_of_intact") is None else 100.0 * r["speed_share_of_intact"]
+                          for r in rows])
+        target = TARGETS["one leg" if len(legs) == 1 else "two legs"] if legs else None
+        met = [target is None or (s >= 100.0 * target[0] and (target[1] is None or h >= 100.0 * target[1]))
+               for s, h in zip(success, share)]
+        cells = [f"{s:.0f}% / {f'{h:.1f}%' if math.isfinite(h) else '-'}{'' if m else '*'}"
+                 for s, h, m in zip(success, share, met)]
+        stats = []
+        for values in (success, share):
+            q25, median, q75 = _percentiles(values)
+            stats.append(f"{median:.0f}%, {q25:.0f} to {q75:.0f}%, {np.nanmin(values):.0f}%" if math.isfinite(median)
+                         else "-")
+        if target is not None:
+            failures += 1
+            every += all(met)
+        lines.append(f"| {' + '.join(map(str, legs)) or 'none'} | " + " | ".join(cells) + f" | {stats[0]} | "
+                     f"{stats[1]} | {f'{sum(met)} of {len(met)}' if target else '-'} |")
+    lines.append(f"\n{every} of {failures} failures met by every seed (cells: success / share of that seed's intact "
+                 "speed; `*`: a seed misses the target, at least 90% and 70% with one leg failed, 75% success "
+                 "with two)")
+    return "\n".join(lines)
+
+
+def labels_of(paths: list[Path]) -> list[str]:
+    """Each file's run folder, or folder and file name where two files share a folder."""
+    folders = [p.parent.name for p in paths]
+    return folders if len(set(folders)) == len(folders) else [f"{p.parent.name}/{p.stem}" for p in paths]
+
+
 def label_of(path: Path) -> str:
     """A run's name from its file: the run folder's (eval.py's metrics.json sits one folder down)."""
     parent = path.parent
@@ -133,7 +188,11 @@ def main(argv=None) -> None:
     parser.add_argument("--json", type=Path, help="also write the per-run figures and the summary here")
     parser.add_argument("--battery", action="store_true",
                         help="the files are generalist batteries (python -m hexa_mjx.studies.generalist --json)")
+    parser.add_argument("--legs", action="store_true",
+                        help="the files are leg-failure sweeps (python -m hexa_mjx.studies.leg_failure_sweep --out)")
     args = parser.parse_args(argv)
+    if args.battery and args.legs:
+        parser.error("--battery and --legs read different files: give one of them")
     missing = [str(f) for f in args.files if not f.is_file()]
     if missing:
         parser.error(f"no such file: {', '.join(missing)} (give eval.py's metrics.json or play.py's --json output)")
@@ -142,7 +201,16 @@ def main(argv=None) -> None:
         if not all(isinstance(b, list) and b and "meets_target" in b[0] for b in batteries):
             parser.error("--battery reads the generalist battery's --json files (a list of conditions)")
         try:
-            print(battery_table([f.parent.name for f in args.files], batteries))
+            print(battery_table(labels_of(args.files), batteries))
+        except ValueError as e:
+            parser.error(str(e))
+        return
+    if args.legs:
+        sweeps = [json.loads(f.read_text()) for f in args.files]
+        if not all(isinstance(s, list) and s and "failed_legs" in s[0] for s in sweeps):
+            parser.error("--legs reads the leg-failure sweep's --out files (a list of conditions)")
+        try:
+            print(sweep_table(labels_of(args.files), sweeps))
         except ValueError as e:
             parser.error(str(e))
         return

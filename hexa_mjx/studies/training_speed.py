@@ -50,7 +50,7 @@ def training_profile(num_envs: int = 256, repeats: int = 3, **overrides) -> dict
     from brax.training.agents.ppo import losses as ppo_losses
     from brax.training.agents.ppo import networks as ppo_networks
 
-    from hexa_mjx.training import loop as training, networks, ppo
+    from hexa_mjx.training import loop as training, networks, optimizer_state, ppo, ppo_update
 
     cfg = config.TrainConfig(num_envs=num_envs, **overrides)
     env = config.make_env_for(cfg)
@@ -64,24 +64,24 @@ def training_profile(num_envs: int = 256, repeats: int = 3, **overrides) -> dict
         out[name] = timed(run, (jax.jit(wrapped.reset)(keys), jax.random.PRNGKey(1)), repeats)[1]
 
     # Acting and the SGD epochs of one update, with the training loop's own functions
-    # (hexa_mjx.training.ppo), on one device under pmap as training runs them.
+    # (hexa_mjx.training.ppo_update), on one device under pmap as training runs them.
     settings = training.ppo_settings(cfg, cfg.steps_per_update, 2, cfg.seed, devices=1)
     wrapped = envs.training.wrap(env, episode_length=cfg.episode_length)
     nets = networks.make_networks(cfg, env)
     normalizer, policy_params, value_params = networks.init_params(cfg, env)
     params = ppo_losses.PPONetworkParams(policy=policy_params, value=value_params)
-    rollout = ppo.rollout_fn(wrapped, ppo_networks.make_inference_fn(nets), settings)
-    optimizer = ppo.make_optimizer(settings)
-    sgd = ppo.sgd_fn(nets, optimizer, settings)
+    rollout = ppo_update.rollout_fn(wrapped, ppo_networks.make_inference_fn(nets), settings)
+    optimizer = optimizer_state.make_optimizer(settings)
+    sgd = ppo_update.sgd_fn(nets, optimizer, settings)
     one = jax.local_devices()[:1]
 
     def replicate(tree):
         return ppo.replicate(tree, one)
 
-    act = jax.pmap(lambda state, key, p: rollout((normalizer, p.policy, p.value), state, key)[1], axis_name=ppo.AXIS)
+    act = jax.pmap(lambda state, key, p: rollout((normalizer, p.policy, p.value), state, key)[1], axis_name=ppo_update.AXIS)
     state0 = jax.tree.map(lambda x: x[None], jax.jit(wrapped.reset)(keys))
     _, out["acting"], data = timed(act, (state0, replicate(jax.random.PRNGKey(1)), replicate(params)), repeats)
-    learn = jax.pmap(lambda o, p, d, k: sgd(o, p, normalizer, d, k)[1], axis_name=ppo.AXIS)
+    learn = jax.pmap(lambda o, p, d, k: sgd(o, p, normalizer, d, k)[1], axis_name=ppo_update.AXIS)
     out["sgd"] = timed(learn, (replicate(optimizer.init(params)), replicate(params), data,
                                 replicate(jax.random.PRNGKey(2))), repeats)[1]
     out["sgd_flop"] = sgd_flop(cfg, env)

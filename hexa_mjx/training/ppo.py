@@ -19,18 +19,16 @@ from typing import Callable
 import jax
 import jax.numpy as jp
 import numpy as np
-import optax
 from brax import envs
-from brax.training import acting, gradients, pmap, types
+from brax.training import pmap, types
 from brax.training.acme import running_statistics, specs
 from brax.training.agents.ppo import losses as ppo_losses
 from brax.training.agents.ppo import networks as ppo_networks
 from brax.training.agents.ppo.train import TrainingState
 
 from hexa_mjx.training import program_store
-
-AXIS = "i"  # the pmap axis the gradients and the normalizer are averaged over
-UNROLL_FIELDS = ("truncation", "episode_metrics", "episode_done")
+from hexa_mjx.training.optimizer_state import adam_of, make_optimizer, with_adam
+from hexa_mjx.training.ppo_update import AXIS, rollout_fn, sgd_fn
 
 
 def unpmap(tree):
@@ -50,18 +48,6 @@ def replicate(tree, devices):
 def strong_types(tree):
     """`tree` with weak types removed: one compile for the first update and the later ones."""
     return jax.tree.map(lambda x: jp.asarray(x).astype(jp.asarray(x).dtype), tree)
-
-
-def adam_of(optimizer_state):
-    """Adam's part of the optimizer state (gradient clipping's part holds nothing)."""
-    return optimizer_state[1]
-
-
-def with_adam(optimizer_state, adam_state):
-    """The optimizer state with Adam's part replaced by `adam_state` (host arrays, as saved)."""
-    restored = jax.tree.map(lambda saved, fresh: jp.asarray(saved, dtype=fresh.dtype), adam_state,
-                            adam_of(optimizer_state))
-    return (optimizer_state[0], restored)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -266,73 +252,3 @@ def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=No
     pmap.assert_is_replicated(state)
     pmap.synchronize_hosts()
     return jax.tree.map(np.asarray, unpmap((state.normalizer_params, state.params.policy, state.params.value)))
-
-
-def make_optimizer(settings: PPOSettings):
-    """brax's PPO optimizer: gradients clipped by global norm, then Adam."""
-    return optax.chain(optax.clip_by_global_norm(settings.max_grad_norm), optax.adam(settings.learning_rate))
-
-
-def rollout_fn(env, make_policy, settings: PPOSettings):
-    """One update's acting, as brax's PPO runs it: `rollout(params, env_state, key) -> (env_state,
-    data)`, every environment stepping `batch_size x num_minibatches / num_envs` segments of
-    `unroll_length` steps with the policy of `params` (normalizer, policy, value); `data` holds one
-    segment per row."""
-
-    def rollout(params, env_state, key):
-        policy = make_policy(params)
-
-        def unroll(carry, _):
-            env_state, key = carry
-            key, next_key = jax.random.split(key)
-            env_state, data = acting.generate_unroll(env, env_state, policy, key, settings.unroll_length,
-                                                     extra_fields=UNROLL_FIELDS)
-            return (env_state, next_key), data
-
-        segments = settings.batch_size * settings.num_minibatches // settings.num_envs
-        (env_state, _), data = jax.lax.scan(unroll, (env_state, key), (), length=segments)
-        # (unrolls x steps x environments) -> (unrolls * environments, steps)
-        data = jax.tree.map(lambda x: jp.swapaxes(x, 1, 2), data)
-        return env_state, jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), data)
-
-    return rollout
-
-
-def sgd_fn(network, optimizer, settings: PPOSettings, scaled_lr: bool = False):
-    """One update's learning, as brax's PPO runs it: `sgd(opt_state, params, normalizer, data, key,
-    lr_scale) -> (opt_state, params)`, `num_updates_per_batch` epochs of minibatch steps on brax's
-    PPO loss, gradients averaged over the pmap axis AXIS. With `scaled_lr`, each Adam step is
-    multiplied by `lr_scale` (Adam's step is proportional to its learning rate)."""
-    loss_and_grad = gradients.loss_and_pgrad(
-        functools.partial(ppo_losses.compute_ppo_loss, ppo_network=network, entropy_cost=settings.entropy_cost,
-                          discounting=settings.discounting, reward_scaling=settings.reward_scaling,
-                          gae_lambda=settings.gae_lambda, clipping_epsilon=settings.clipping_epsilon,
-                          normalize_advantage=True, vf_coefficient=settings.vf_loss_coefficient),
-        pmap_axis_name=AXIS, has_aux=True)
-
-    def minibatch_step(carry, data, normalizer, lr_scale):
-        opt_state, params, key = carry
-        key, key_loss = jax.random.split(key)
-        _, grads = loss_and_grad(params, normalizer, data, key_loss)
-        step, opt_state = optimizer.update(grads, opt_state)
-        if scaled_lr:
-            step = jax.tree.map(lambda x: x * lr_scale, step)
-        return (opt_state, optax.apply_updates(params, step), key), None
-
-    def sgd_epoch(carry, _, data, normalizer, lr_scale):
-        opt_state, params, key = carry
-        key, key_perm, key_grad = jax.random.split(key, 3)
-        shuffled = jax.tree.map(lambda x: jax.random.permutation(key_perm, x).reshape(
-            (settings.num_minibatches, -1) + x.shape[1:]), data)
-        (opt_state, params, _), _ = jax.lax.scan(
-            functools.partial(minibatch_step, normalizer=normalizer, lr_scale=lr_scale),
-            (opt_state, params, key_grad), shuffled, length=settings.num_minibatches)
-        return (opt_state, params, key), None
-
-    def sgd(opt_state, params, normalizer, data, key, lr_scale=1.0):
-        (opt_state, params, _), _ = jax.lax.scan(
-            functools.partial(sgd_epoch, data=data, normalizer=normalizer, lr_scale=lr_scale),
-            (opt_state, params, key), (), length=settings.num_updates_per_batch)
-        return opt_state, params
-
-    return sgd
