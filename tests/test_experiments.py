@@ -166,19 +166,26 @@ def test_seed_summary_reports_median_iqr_and_worst_of_eval_and_play_files(tmp_pa
         seed_summary.main([str(tmp_path / "missing.json")])
 
 
+def seed_files(tmp_path, pattern: str, per_seed: list) -> list:
+    """One JSON file per seed at tmp_path / pattern.format(seed), each holding that seed's rows."""
+    files = []
+    for seed, rows in enumerate(per_seed):
+        files.append(tmp_path / pattern.format(seed))
+        files[-1].parent.mkdir(parents=True)
+        files[-1].write_text(json.dumps(rows))
+    return files
+
+
 def test_seed_summary_of_generalist_batteries(tmp_path, capsys):
     from hexa_mjx.studies import seed_summary
 
     # Three seeds, two conditions: completions 100/90/80% (all meet) and 50/100/75% (the first misses).
-    files = []
-    for seed, (flat, leg, leg_met) in enumerate([(1.0, 0.5, False), (0.9, 1.0, True), (0.8, 0.75, True)]):
-        rows = [{"group": "flat", "condition": "flat, intact", "path_completed_rate": flat, "fall_rate": 0.0,
-                 "meets_target": True},
-                {"group": "one leg", "condition": "leg 1 limp", "path_completed_rate": leg, "fall_rate": 0.0,
-                 "meets_target": leg_met}]
-        (tmp_path / f"gen-s{seed}").mkdir()
-        files.append(tmp_path / f"gen-s{seed}" / "battery.json")
-        files[-1].write_text(json.dumps(rows))
+    files = seed_files(tmp_path, "gen-s{}/battery.json", [
+        [{"group": "flat", "condition": "flat, intact", "path_completed_rate": flat, "fall_rate": 0.0,
+          "meets_target": True},
+         {"group": "one leg", "condition": "leg 1 limp", "path_completed_rate": leg, "fall_rate": 0.0,
+          "meets_target": leg_met}]
+        for flat, leg, leg_met in [(1.0, 0.5, False), (0.9, 1.0, True), (0.8, 0.75, True)]])
     seed_summary.main(["--battery", *map(str, files)])
     out = capsys.readouterr().out
     assert "| flat, intact | 100% | 90% | 80% | 90% | 85 to 95% | 80% | 3 of 3 |" in out
@@ -199,14 +206,11 @@ def test_seed_summary_of_leg_failure_sweeps(tmp_path, capsys):
 
     # Three seeds: with leg 1 failed, one meets the target (90% at 70%), one misses on success and one
     # on speed; with legs 1 and 6, one misses 75% success. Intact has no target.
-    files = []
-    for seed, (leg, share, pair) in enumerate([(0.95, 0.80, 0.80), (0.85, 0.75, 0.70), (1.0, 0.65, 0.90)]):
-        rows = [{"failed_legs": [], "success_rate": 1.0, "speed_share_of_intact": 1.0},
-                {"failed_legs": [1], "success_rate": leg, "speed_share_of_intact": share},
-                {"failed_legs": [1, 6], "success_rate": pair, "speed_share_of_intact": None}]
-        (tmp_path / f"legfail-s{seed}").mkdir()
-        files.append(tmp_path / f"legfail-s{seed}" / "sweep.json")
-        files[-1].write_text(json.dumps(rows))
+    files = seed_files(tmp_path, "legfail-s{}/sweep.json", [
+        [{"failed_legs": [], "success_rate": 1.0, "speed_share_of_intact": 1.0},
+         {"failed_legs": [1], "success_rate": leg, "speed_share_of_intact": share},
+         {"failed_legs": [1, 6], "success_rate": pair, "speed_share_of_intact": None}]
+        for leg, share, pair in [(0.95, 0.80, 0.80), (0.85, 0.75, 0.70), (1.0, 0.65, 0.90)]])
     seed_summary.main(["--legs", *map(str, files)])
     out = capsys.readouterr().out
     assert "| 1 | 95% / 80.0% | 85% / 75.0%* | 100% / 65.0%* | 95%, 90 to 98%, 85% | 75%, 70 to 78%, 65% | 1 of 3 |" in out

@@ -181,6 +181,11 @@ def label_of(path: Path) -> str:
     return parent.parent.name if path.name == "metrics.json" else f"{parent.name}/{path.stem}"
 
 
+# --battery and --legs: (a key every row has, the table, what the files are)
+LIST_FILES = {"battery": ("meets_target", battery_table, "the generalist battery's --json files"),
+              "legs": ("failed_legs", sweep_table, "the leg-failure sweep's --out files")}
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -196,21 +201,14 @@ def main(argv=None) -> None:
     missing = [str(f) for f in args.files if not f.is_file()]
     if missing:
         parser.error(f"no such file: {', '.join(missing)} (give eval.py's metrics.json or play.py's --json output)")
-    if args.battery:
-        batteries = [json.loads(f.read_text()) for f in args.files]
-        if not all(isinstance(b, list) and b and "meets_target" in b[0] for b in batteries):
-            parser.error("--battery reads the generalist battery's --json files (a list of conditions)")
+    mode = "battery" if args.battery else "legs" if args.legs else None
+    if mode is not None:  # files of one list of conditions each, told apart by a key of their rows
+        key, make_table, what = LIST_FILES[mode]
+        docs = [json.loads(f.read_text()) for f in args.files]
+        if not all(isinstance(d, list) and d and key in d[0] for d in docs):
+            parser.error(f"--{mode} reads {what} (a list of conditions)")
         try:
-            print(battery_table(labels_of(args.files), batteries))
-        except ValueError as e:
-            parser.error(str(e))
-        return
-    if args.legs:
-        sweeps = [json.loads(f.read_text()) for f in args.files]
-        if not all(isinstance(s, list) and s and "failed_legs" in s[0] for s in sweeps):
-            parser.error("--legs reads the leg-failure sweep's --out files (a list of conditions)")
-        try:
-            print(sweep_table(labels_of(args.files), sweeps))
+            print(make_table(labels_of(args.files), docs))
         except ValueError as e:
             parser.error(str(e))
         return
