@@ -133,7 +133,7 @@ def sweep_table(labels: list[str], sweeps: list[list[dict]]) -> str:
     each seed's success and share of its intact speed (`*`: that seed misses the target, the
     generalist battery's for one or two failed legs), the median, IQR and worst of each, and the
     seeds that meet the target; last, the failures every seed meets."""
-    from hexa_mjx.studies.generalist import TARGETS
+    from hexa_mjx.studies.generalist import meets
 
     conditions = [tuple(r["failed_legs"]) for r in sweeps[0]]
     for label, rows in zip(labels, sweeps):
@@ -148,9 +148,10 @@ def sweep_table(labels: list[str], sweeps: list[list[dict]]) -> str:
         success = np.array([100.0 * r["success_rate"] for r in rows])
         share = np.array([math.nan if r.get("speed_share_of_intact") is None else 100.0 * r["speed_share_of_intact"]
                           for r in rows])
-        target = TARGETS["one leg" if len(legs) == 1 else "two legs"] if legs else None
-        met = [target is None or (s >= 100.0 * target[0] and (target[1] is None or h >= 100.0 * target[1]))
-               for s, h in zip(success, share)]
+        group = ("one leg" if len(legs) == 1 else "two legs") if legs else None
+        met = [group is None or meets({"group": group, "path_completed_rate": r["success_rate"],
+                                       "speed_share_of_intact": r.get("speed_share_of_intact"),
+                                       "fall_rate": r.get("fall_rate")}) for r in rows]
         cells = [f"{s:.0f}% / {f'{h:.1f}%' if math.isfinite(h) else '-'}{'' if m else '*'}"
                  for s, h, m in zip(success, share, met)]
         stats = []
@@ -158,11 +159,11 @@ def sweep_table(labels: list[str], sweeps: list[list[dict]]) -> str:
             q25, median, q75 = _percentiles(values)
             stats.append(f"{median:.0f}%, {q25:.0f} to {q75:.0f}%, {np.nanmin(values):.0f}%" if math.isfinite(median)
                          else "-")
-        if target is not None:
+        if group is not None:
             failures += 1
             every += all(met)
         lines.append(f"| {' + '.join(map(str, legs)) or 'none'} | " + " | ".join(cells) + f" | {stats[0]} | "
-                     f"{stats[1]} | {f'{sum(met)} of {len(met)}' if target else '-'} |")
+                     f"{stats[1]} | {f'{sum(met)} of {len(met)}' if group else '-'} |")
     lines.append(f"\n{every} of {failures} failures met by every seed (cells: success / share of that seed's intact "
                  "speed; `*`: a seed misses the target, at least 90% and 70% with one leg failed, 75% success "
                  "with two)")

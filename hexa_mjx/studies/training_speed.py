@@ -78,7 +78,8 @@ def training_profile(num_envs: int = 256, repeats: int = 3, **overrides) -> dict
     def replicate(tree):
         return ppo.replicate(tree, one)
 
-    act = jax.pmap(lambda state, key, p: rollout((normalizer, p.policy, p.value), state, key)[1], axis_name=ppo_update.AXIS)
+    act = jax.pmap(lambda state, key, p: rollout((normalizer, p.policy, p.value), state, key)[1],
+                   axis_name=ppo_update.AXIS)
     state0 = jax.tree.map(lambda x: x[None], jax.jit(wrapped.reset)(keys))
     _, out["acting"], data = timed(act, (state0, replicate(jax.random.PRNGKey(1)), replicate(params)), repeats)
     learn = jax.pmap(lambda o, p, d, k: sgd(o, p, normalizer, d, k)[1], axis_name=ppo_update.AXIS)

@@ -35,8 +35,6 @@ def with_adam(optimizer_state, adam_state):
     return (optimizer_state[0], restored)
 
 
-
-
 def adam_template(params_template, lr: float = 1e-3):
     """Adam's state for (normalizer, policy, value) params, as PPO optimizes them."""
     from brax.training.agents.ppo import losses
