@@ -113,8 +113,9 @@ class RobotModel:
         self.start_xy = self.qpos0[:2].copy()
         # Legs in their order around the torso (the hips' bearings from its centre): two legs are
         # adjacent when they are neighbours on that ring (--leg_failure_pairs fails two that are not).
-        hips = data.xanchor[self.hips, :2] - data.xpos[torso, :2]
-        ring = np.argsort(np.argsort(np.arctan2(hips[:, 1], hips[:, 0])))
+        hips = (data.xanchor[self.hips] - data.xpos[torso]) @ data.xmat[torso].reshape(3, 3)  # torso frame
+        self.hip_bearings = np.arctan2(hips[:, 1], hips[:, 0])  # rad, counter-clockwise from the torso's x axis
+        ring = np.argsort(np.argsort(self.hip_bearings))
         n = len(self.legs)
         self.non_adjacent_pairs = np.array([(i, j) for i in range(n) for j in range(i + 1, n)
                                             if min((ring[i] - ring[j]) % n, (ring[j] - ring[i]) % n) > 1],

@@ -14,7 +14,7 @@ import jax
 from hexa_mjx.mdp import rewards
 from hexa_mjx.robot import constants as robot
 from hexa_mjx.tasks import default_reward, task_class
-from hexa_mjx.training import distributed
+from hexa_mjx.training import distributed, symmetry
 from hexa_mjx.training.checkpoints import list_checkpoints, resolve_checkpoint
 from hexa_mjx.training.config import RESUMABLE, ConfigError, TrainConfig, default_run_dir, load_config, \
     make_env_for, saved_settings
@@ -27,7 +27,7 @@ RANGES = {
     "clip": (0.0, math.inf, False, False), "vf_coef": (0.0, math.inf, True, False),
     "ent_coef": (0.0, math.inf, True, False), "max_grad_norm": (0.0, math.inf, False, False),
     "reward_scaling": (0.0, math.inf, False, False), "mean_init_scale": (0.0, math.inf, False, False),
-    "init_noise_std": (0.0, math.inf, False, False),
+    "init_noise_std": (0.0, math.inf, False, False), "symmetry_loss": (0.0, math.inf, True, False),
     "ctrl_hz": (0.0, math.inf, False, False), "batch_size": (1, math.inf, True, False),
     "num_minibatches": (1, math.inf, True, False), "num_envs": (1, math.inf, True, False),
 }
@@ -122,7 +122,14 @@ def validate(cfg: TrainConfig, writes: bool = True) -> TrainConfig:
     if cfg.model and not Path(cfg.model).is_file():
         raise ConfigError(f"--model {cfg.model} is not a file; convert a URDF with "
                           f"`python -m hexa_mjx.robot.convert URDF -o {cfg.model}`")
-    make_env_for(cfg, curriculum_levels=cfg.curriculum_levels)  # a bad ctrl_hz, task or reward raises here
+    env = make_env_for(cfg, curriculum_levels=cfg.curriculum_levels)  # a bad ctrl_hz, task or reward raises here
+    if cfg.symmetry_loss:
+        if cfg.symmetry_turns < 2:
+            raise ConfigError(f"--symmetry_turns must be at least 2 (a half turn), got {cfg.symmetry_turns}")
+        try:
+            symmetry.maps_for(env, cfg.symmetry_turns)
+        except ValueError as e:
+            raise ConfigError(str(e)) from None
     if cfg.init_from and not (cfg.resume and list_checkpoints(run_dir)):  # a resume needs only its own
         init_checkpoint(cfg)
     if writes:

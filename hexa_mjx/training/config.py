@@ -127,6 +127,11 @@ class TrainConfig:
     privileged_critic: bool = field(PPO, False, "asymmetric actor-critic: the value network also reads the "
                                     "observation without its noise and which legs failed and how; the policy, "
                                     "its ONNX file and evaluations are unchanged (hexa_mjx.training.critic)")
+    symmetry_loss: float = field(PPO, 0.0, "weight of a loss asking the policy to act alike when its legs are "
+                                 "relabelled by a turn of the torso, so that it treats every leg alike (the mirror loss "
+                                 "of Isaac Lab's rsl_rl; hexa_mjx.training.symmetry); 0: off")
+    symmetry_turns: int = field(PPO, 6, "equal turns of a full circle that --symmetry_loss relabels the legs by: 6 on "
+                                "the hexapod (every leg); 2, the half turn alone, under which its torso box repeats too")
     init_noise_std: float = field(PPO, 1.0, "initial std of the policy's action noise, in action units (CleanRL: 1); "
                                   "learned after that")
 

@@ -19,7 +19,7 @@ from pathlib import Path
 import jax
 import jax.numpy as jp
 
-from hexa_mjx.training import distributed, crash_points as faults, ppo, resume as exact, selection
+from hexa_mjx.training import distributed, crash_points as faults, ppo, resume as exact, selection, symmetry
 from hexa_mjx.mdp import randomization
 from hexa_mjx.training.checkpoints import (BEST, checkpoint_dir, list_checkpoints, load_checkpoint, load_latest,
                                            load_resume, remove_temporaries, resolve_checkpoint, save_checkpoint)
@@ -30,7 +30,7 @@ from hexa_mjx.training.jax_setup import devices_for, prepare_jax
 from hexa_mjx.training.progress import Logger, keep_rows_up_to
 from hexa_mjx.training.run_lock import RunLock
 from hexa_mjx.evaluation.run_evaluator import RunEvaluator
-from hexa_mjx.engines.wrappers import mean_last_return
+from hexa_mjx.engines.wrappers import POLICY_KEY, mean_last_return
 from hexa_mjx.training.critic import with_critic
 from hexa_mjx.training.networks import init_params, network_factory, policy_maker, templates
 from hexa_mjx import atomic
@@ -251,6 +251,11 @@ def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
     faults.point("compiling")
     settings = (ppo_settings(cfg, cfg.num_timesteps, cfg.num_evals, cfg.seed, devices) if position else
                 ppo_settings(cfg, remaining, evals_for(cfg, remaining), cfg.seed + start_step, devices))
+    extra_loss = None
+    if cfg.symmetry_loss:
+        obs_maps, act_maps = symmetry.maps_for(env, cfg.symmetry_turns)
+        extra_loss = functools.partial(symmetry.mirror_loss, weight=cfg.symmetry_loss, obs_maps=obs_maps,
+                                       act_maps=act_maps, policy_key=POLICY_KEY if cfg.privileged_critic else None)
     ppo.train(env, settings, network_factory(cfg),
               # Returns are kept whether or not this process prints them: every process runs one program.
               wrap_env_fn=wrap_env_fn(env, cfg.randomize, track_returns=True, failure_schedule=schedule,
@@ -259,7 +264,7 @@ def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
               anneal_lr=(offset, cfg.num_timesteps) if cfg.anneal_lr else None,
               on_interval=on_interval, on_update=on_update, resume=position, environments=environments,
               stop=asked_to_stop if stop is not None else None, on_stop=on_stop,
-              programs=programs)
+              programs=programs, extra_loss=extra_loss)
     total = time.time() - t0
     if logger is None:
         print(f"process {jax.process_index()} done: {remaining:,} steps in {total / 60:.1f} min")

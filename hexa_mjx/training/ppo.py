@@ -95,7 +95,7 @@ def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=No
           restore_params=None, restore_adam=None, anneal_lr: tuple[int, int] | None = None,
           on_interval: Callable | None = None, on_update: Callable | None = None, resume: dict | None = None,
           environments: list | None = None, stop: Callable | None = None, on_stop: Callable | None = None,
-          programs: object = None):
+          programs: object = None, extra_loss: Callable | None = None):
     """PPO as brax's `ppo.train` runs it (the same `settings` and `network_factory`), for
     `settings.num_timesteps` env steps in `settings.num_evals - 1` intervals. On every process,
     `on_interval(step, make_policy, params, adam_state, env_state)` is called before training and
@@ -113,7 +113,8 @@ def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=No
     asked after every update; when it says so, `on_stop(step, params, adam_state, position)` is
     called and training returns early. `programs` (JSON-able: what the environment, wrappers and
     networks were made from) keeps the compiled reset and update in `program_store` under it, so
-    that a second run loads them without tracing. Returns the final (normalizer, policy, value)
+    that a second run loads them without tracing. `extra_loss(network)` makes a loss added to PPO's
+    (`ppo_update.sgd_fn`). Returns the final (normalizer, policy, value)
     params."""
     if not settings.normalize_observations:
         raise ValueError("hexa_mjx's PPO always normalizes observations")
@@ -153,7 +154,7 @@ def train(environment, settings: PPOSettings, network_factory, *, wrap_env_fn=No
     make_policy = ppo_networks.make_inference_fn(network)
     optimizer = make_optimizer(settings)
     rollout = rollout_fn(env, make_policy, settings)
-    sgd = sgd_fn(network, optimizer, settings, scaled_lr=anneal_lr is not None)
+    sgd = sgd_fn(network, optimizer, settings, scaled_lr=anneal_lr is not None, extra_loss=extra_loss)
 
     def update(state: TrainingState, env_state, key):
         """One PPO update: every environment rolls out, then epochs of minibatch SGD on the batch."""

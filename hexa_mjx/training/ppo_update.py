@@ -46,17 +46,25 @@ def rollout_fn(env, make_policy, settings: PPOSettings):
     return rollout
 
 
-def sgd_fn(network, optimizer, settings: PPOSettings, scaled_lr: bool = False):
+def sgd_fn(network, optimizer, settings: PPOSettings, scaled_lr: bool = False, extra_loss=None):
     """One update's learning, as brax's PPO runs it: `sgd(opt_state, params, normalizer, data, key,
     lr_scale) -> (opt_state, params)`, `num_updates_per_batch` epochs of minibatch steps on brax's
     PPO loss, gradients averaged over the pmap axis AXIS. With `scaled_lr`, each Adam step is
-    multiplied by `lr_scale` (Adam's step is proportional to its learning rate)."""
-    loss_and_grad = gradients.loss_and_pgrad(
-        functools.partial(ppo_losses.compute_ppo_loss, ppo_network=network, entropy_cost=settings.entropy_cost,
-                          discounting=settings.discounting, reward_scaling=settings.reward_scaling,
-                          gae_lambda=settings.gae_lambda, clipping_epsilon=settings.clipping_epsilon,
-                          normalize_advantage=True, vf_coefficient=settings.vf_loss_coefficient),
-        pmap_axis_name=AXIS, has_aux=True)
+    multiplied by `lr_scale` (Adam's step is proportional to its learning rate). `extra_loss(network)`
+    makes a `loss(params, normalizer, observation)` added to PPO's (`hexa_mjx.training.symmetry`)."""
+    ppo_loss = functools.partial(ppo_losses.compute_ppo_loss, ppo_network=network, entropy_cost=settings.entropy_cost,
+                                 discounting=settings.discounting, reward_scaling=settings.reward_scaling,
+                                 gae_lambda=settings.gae_lambda, clipping_epsilon=settings.clipping_epsilon,
+                                 normalize_advantage=True, vf_coefficient=settings.vf_loss_coefficient)
+    if extra_loss is not None:
+        added = extra_loss(network)
+
+        def with_added(params, normalizer, data, key):
+            total, metrics = ppo_loss(params, normalizer, data, key)
+            return total + added(params, normalizer, data.observation), metrics
+
+    loss_and_grad = gradients.loss_and_pgrad(ppo_loss if extra_loss is None else with_added,
+                                             pmap_axis_name=AXIS, has_aux=True)
 
     def minibatch_step(carry, data, normalizer, lr_scale):
         opt_state, params, key = carry
