@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from conftest import TINY, run
+from hexa_mjx.studies.symmetry_gap import symmetry_gap
 from hexa_mjx.training import config, networks, symmetry
 from hexa_mjx.training.checks import validate
 from hexa_mjx.training.config import ConfigError
@@ -150,3 +151,5 @@ def test_a_run_with_the_mirror_loss_trains(tmp_path):
                "--num_timesteps", "128", "--run_dir", str(tmp_path / "run")])
     assert "done: 128 steps" in out.stdout
     assert config.load_config(tmp_path / "run").symmetry_loss == 1.0
+    gap = symmetry_gap(tmp_path / "run", episodes=2, steps=3, every=1)
+    assert 0.0 < gap < 1.0  # a barely trained policy's mean actions are near 0 under every labelling
