@@ -2,7 +2,7 @@
 physics of a turned robot, the mirror loss is zero only for a policy that respects them, and a run
 with it trains."""
 
-import dataclasses
+import types
 
 import jax
 import jax.numpy as jp
@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from conftest import TINY, run
+from hexa_mjx.robot.kinematics import quat_mul
 from hexa_mjx.studies.symmetry_gap import symmetry_gap
 from hexa_mjx.training import config, networks, symmetry
 from hexa_mjx.training.checks import validate
@@ -21,15 +22,17 @@ def quat_z(angle):
     return np.array([np.cos(angle / 2), 0.0, 0.0, np.sin(angle / 2)])
 
 
-def quat_mul(a, b):
-    out = np.empty(4)
-    mujoco.mju_mulQuat(out, a, b)
-    return out
-
-
 @pytest.fixture(scope="module")
 def velocity_env():
     return config.make_env_for(config.TrainConfig(task="velocity"))
+
+
+@pytest.fixture(scope="module")
+def small_policy(velocity_env):
+    """(networks, normalizer, policy params) of a small velocity policy with a full-scale mean layer."""
+    cfg = config.TrainConfig(task="velocity", hidden=[16, 16], mean_init_scale=1.0)
+    normalizer, policy, _ = networks.init_params(cfg, velocity_env)
+    return networks.make_networks(cfg, velocity_env), normalizer, policy
 
 
 def test_relabelled_state_is_the_same_robot(velocity_env):
@@ -89,15 +92,13 @@ def test_maps_are_a_group(velocity_env):
         np.testing.assert_allclose(maps[0] @ maps[4], np.eye(len(maps[0])), atol=1e-6)
 
 
-def test_mirror_loss_is_zero_for_a_symmetric_policy_only(velocity_env):
+def test_mirror_loss_is_zero_for_a_symmetric_policy_only(velocity_env, small_policy):
     """A policy made equivariant by averaging over the turns has no mirror loss; a random one has."""
-    cfg = config.TrainConfig(task="velocity", hidden=[16, 16], mean_init_scale=1.0)
-    net = networks.make_networks(cfg, velocity_env)
-    normalizer, policy, value = networks.init_params(cfg, velocity_env)
+    net, normalizer, policy = small_policy
     obs_maps, act_maps = symmetry.maps_for(velocity_env, 6)
     loss = symmetry.mirror_loss(net, 2.0, obs_maps, act_maps)
     obs = jax.random.normal(jax.random.PRNGKey(1), (3, 5, velocity_env.observation_size))
-    params = type("P", (), {"policy": policy})
+    params = types.SimpleNamespace(policy=policy)
     assert float(loss(params, normalizer, obs)) > 1e-4
 
     class Averaged:  # g^-1 f(g s), averaged over the group: equivariant by construction
@@ -108,30 +109,29 @@ def test_mirror_loss_is_zero_for_a_symmetric_policy_only(velocity_env):
                 total = total + jp.einsum("ji,...j->...i", am, net.policy_network.apply(norm, pol, o @ om.T)[0])
             return total / (len(obs_maps) + 1), None
 
-    averaged = type("N", (), {"policy_network": Averaged})
+    averaged = types.SimpleNamespace(policy_network=Averaged)
     assert float(symmetry.mirror_loss(averaged, 2.0, obs_maps, act_maps)(params, normalizer, obs)) < 1e-10
 
 
-def test_descending_the_mirror_loss_makes_the_policy_symmetric(velocity_env):
+def test_descending_the_mirror_loss_makes_the_policy_symmetric(velocity_env, small_policy):
     """Gradient steps on the loss alone shrink it: its gradient reaches the policy."""
     import optax
 
-    cfg = config.TrainConfig(task="velocity", hidden=[16, 16], mean_init_scale=1.0)
-    net = networks.make_networks(cfg, velocity_env)
-    normalizer, policy, _ = networks.init_params(cfg, velocity_env)
+    net, normalizer, policy = small_policy
     loss = symmetry.mirror_loss(net, 1.0, *symmetry.maps_for(velocity_env, 6))
     obs = jax.random.normal(jax.random.PRNGKey(2), (64, velocity_env.observation_size))
-    P = type("P", (), {})
 
     def of(policy):
-        p = P()
-        p.policy = policy
-        return loss(p, normalizer, obs)
+        return loss(types.SimpleNamespace(policy=policy), normalizer, obs)
 
     opt = optax.adam(1e-2)
+
+    @jax.jit
+    def step(policy, state):
+        updates, state = opt.update(jax.grad(of)(policy), state)
+        return optax.apply_updates(policy, updates), state
+
     state, first = opt.init(policy), float(of(policy))
-    step = jax.jit(lambda pol, st: (lambda g: (optax.apply_updates(pol, opt.update(g, st)[0]), opt.update(g, st)[1]))(
-        jax.grad(of)(pol)))
     for _ in range(100):
         policy, state = step(policy, state)
     assert float(of(policy)) < first / 10
