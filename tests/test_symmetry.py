@@ -39,8 +39,9 @@ def test_relabelled_state_is_the_same_robot(velocity_env):
     """A robot turned about its own vertical axis by a multiple of 60 degrees, its joints relabelled
     by the action map, has every foot where the original's relabelled foot is, before and after
     20 physics steps under the relabelled controls, and observes the relabelled observation. The
-    half turn is exact; the converted legs repeat under the others to within half a millimetre (the
-    URDF's rounded offsets), and their 20 steps stay within 5% of how far the feet moved."""
+    half turn is exact; the converted legs repeat under the others to within a millimetre (0.5 mm
+    at this pose; the URDF's rounded offsets), and their 20 steps stay within 5% of how far the
+    feet moved."""
     env, rng = velocity_env, np.random.default_rng(0)
     robot, task = env.robot, env.task
     model = robot.mj_model
