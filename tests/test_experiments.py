@@ -3,6 +3,7 @@
 import csv
 import dataclasses
 import json
+import math
 
 import matplotlib.image as mpimg
 import pytest
@@ -164,6 +165,21 @@ def test_seed_summary_reports_median_iqr_and_worst_of_eval_and_play_files(tmp_pa
     assert seed_summary.figures(json.loads(native.read_text()))["success"] == pytest.approx(50.0)
     with pytest.raises(SystemExit):
         seed_summary.main([str(tmp_path / "missing.json")])
+
+
+def test_seed_summary_reads_navigations_worst_sector_or_band(tmp_path):
+    from hexa_mjx.studies import seed_summary
+
+    navigation = {"sectors": {"+0 deg": {"goals": 30, "success": 1.0}, "+45 deg": {"goals": 29, "success": 0.931},
+                              "+90 deg": {"goals": 0, "success": None}},
+                  "bands": {"0.5-1.0 m": {"goals": 50, "success": 0.98}}, "goals_per_episode_mean": 8.5}
+    doc = {"config": {"task": "navigate"}, "summary": {"success_rate": 0.99, "fall_rate": 0.01,
+                                                       "navigation": navigation}}
+    row = seed_summary.figures(doc)
+    assert row["worst sector or band"] == pytest.approx(93.1)  # the 45-degree sector, not the empty one
+    assert row["goals per episode"] == pytest.approx(8.5)
+    assert "goals per episode |" in seed_summary.table(["a", "b"], [row, row])
+    assert math.isnan(seed_summary.figures({"summary": {"fall_rate": 0.0}})["worst sector or band"])
 
 
 def seed_files(tmp_path, pattern: str, per_seed: list) -> list:

@@ -34,8 +34,18 @@ FIGURES = (
     ("success", [("summary", "success_rate")], "%", "min"),
     ("no fall", [("summary", "fall_rate")], "%", "min"),
     ("feet only", [("summary", "feet_only_steps"), ("summary", "feet_only_share")], "%", "min"),
+    # navigation: the first goal's success in its worst 45-degree sector or 0.5 m distance band
+    ("worst sector or band", [("summary", "navigation")], "%", "min"),
+    ("goals per episode", [("summary", "navigation", "goals_per_episode_mean")], "", "min"),
 )
-SHARES = {"success", "no fall", "feet only"}  # fractions, shown in percent
+SHARES = {"success", "no fall", "feet only", "worst sector or band"}  # fractions, shown in percent
+
+
+def worst_cell(navigation: dict) -> float:
+    """The lowest success over eval.py's navigation sectors and distance bands (cells with goals)."""
+    cells = [c["success"] for table in ("sectors", "bands") for c in navigation.get(table, {}).values()
+             if c.get("success") is not None]
+    return min(cells) if cells else math.nan
 
 
 def _lookup(doc: dict, paths) -> float:
@@ -43,6 +53,8 @@ def _lookup(doc: dict, paths) -> float:
         value = doc
         for key in path:
             value = value.get(key) if isinstance(value, dict) else None
+        if isinstance(value, dict) and path[-1] == "navigation":
+            value = worst_cell(value)
         if isinstance(value, (int, float)) and math.isfinite(value):
             return float(value)
     return math.nan
@@ -89,7 +101,7 @@ def table(labels: list[str], rows: list[dict]) -> str:
     stats = summarize(rows)
     names = [n for n, *_ in FIGURES if n in stats]
     units = {n: u for n, _, u, _ in FIGURES}
-    lines = ["| run | " + " | ".join(f"{n} ({units[n]})" for n in names) + " |",
+    lines = ["| run | " + " | ".join(f"{n} ({units[n]})" if units[n] else n for n in names) + " |",
              "|---" * (len(names) + 1) + "|"]
     lines += [f"| {label} | " + " | ".join(_cell(n, r[n]) for n in names) + " |" for label, r in zip(labels, rows)]
     lines.append("| median | " + " | ".join(_cell(n, stats[n]["median"]) for n in names) + " |")
