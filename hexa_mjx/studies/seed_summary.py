@@ -7,6 +7,7 @@ interquartile range and the worst seed (rliable's way of reporting few runs: Aga
     python -m hexa_mjx.studies.seed_summary --legs runs/legfail-s*/sweep-leg.json
 
 Reads eval.py's metrics.json and play.py's --json files alike; a figure one of them lacks is "-".
+Navigation's evaluations add the worst 45-degree sector or distance band and the goals per episode.
 With --battery, the files are the generalist battery's (`hexa_mjx.studies.generalist --json`), and
 the table has one row per condition: each seed's path completion, the median, IQR and worst, and
 how many seeds meet the condition's target. With --legs, they are leg-failure sweeps
@@ -24,6 +25,13 @@ from pathlib import Path
 
 import numpy as np
 
+def worst_cell(navigation: dict) -> float:
+    """The lowest success over eval.py's navigation sectors and distance bands (cells with goals)."""
+    cells = [c["success"] for table in ("sectors", "bands") for c in navigation.get(table, {}).values()
+             if c.get("success") is not None]
+    return min(cells) if cells else math.nan
+
+
 # (name, where in the file, unit, "max" if the largest value is the worst else "min"); a path is a
 # list of alternatives, each a key path: eval.py and play.py name a few figures differently.
 FIGURES = (
@@ -35,26 +43,20 @@ FIGURES = (
     ("no fall", [("summary", "fall_rate")], "%", "min"),
     ("feet only", [("summary", "feet_only_steps"), ("summary", "feet_only_share")], "%", "min"),
     # navigation: the first goal's success in its worst 45-degree sector or 0.5 m distance band
-    ("worst sector or band", [("summary", "navigation")], "%", "min"),
+    ("worst sector or band", [("summary", "navigation", worst_cell)], "%", "min"),
     ("goals per episode", [("summary", "navigation", "goals_per_episode_mean")], "", "min"),
 )
 SHARES = {"success", "no fall", "feet only", "worst sector or band"}  # fractions, shown in percent
 
 
-def worst_cell(navigation: dict) -> float:
-    """The lowest success over eval.py's navigation sectors and distance bands (cells with goals)."""
-    cells = [c["success"] for table in ("sectors", "bands") for c in navigation.get(table, {}).values()
-             if c.get("success") is not None]
-    return min(cells) if cells else math.nan
-
-
 def _lookup(doc: dict, paths) -> float:
     for path in paths:
         value = doc
-        for key in path:
-            value = value.get(key) if isinstance(value, dict) else None
-        if isinstance(value, dict) and path[-1] == "navigation":
-            value = worst_cell(value)
+        for key in path:  # a key, or a function of the dict reached so far
+            if not isinstance(value, dict):
+                value = None
+                break
+            value = key(value) if callable(key) else value.get(key)
         if isinstance(value, (int, float)) and math.isfinite(value):
             return float(value)
     return math.nan
