@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+
 def worst_cell(navigation: dict) -> float:
     """The lowest success over eval.py's navigation sectors and distance bands (cells with goals)."""
     cells = [c["success"] for table in ("sectors", "bands") for c in navigation.get(table, {}).values()
