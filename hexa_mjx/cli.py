@@ -14,8 +14,8 @@ from hexa_mjx.mdp.config import EnvConfig
 
 # The environment settings eval.py and play.py take, spelt as train.py spells them; unset, each
 # keeps the run's (or the exported policy's) own value.
-ENV_FLAGS = ("episode_length", "goal_distance", "goal_min_distance", "goal_max_distance", "waypoints",
-             "start_joint_noise", "start_yaw_noise", "max_contact_points", "push_speed", "push_interval",
+ENV_FLAGS = ("episode_length", "goal_distance", "goal_min_distance", "goal_max_distance", "goal_stay_share",
+             "waypoints", "start_joint_noise", "start_yaw_noise", "max_contact_points", "push_speed", "push_interval",
              "action_latency", "obs_noise", "disabled_legs", "leg_failure", "leg_failure_rate",
              "leg_failure_pairs", "failure_mode", "terrain", "terrain_seed",
              "terrain_difficulty", "command_vx", "command_vy", "command_yaw_rate", "command_interval",

@@ -9,6 +9,9 @@ import hexa_mjx
 from hexa_mjx.evaluation import nav_metrics
 from hexa_mjx.robot.kinematics import quat_mul, rotate, yaw
 from hexa_mjx.engines.mjx_env import DRAWS
+from hexa_mjx.engines.native import NativeEnv, NumpyDraws as NativeDraws
+from hexa_mjx.mdp import events
+from hexa_mjx.mdp.config import EnvConfig
 from hexa_mjx import cli
 from hexa_mjx.tasks import reward_variants
 
@@ -200,3 +203,56 @@ def test_path_deviation_and_arrivals():
     out = nav_metrics.waypoint_summary(start, qpos, completed, alive, np.array([False]), [(1, 0), (1, 1)], dt=0.5)
     assert out["completed_rate"] == 1.0 and out["arrival_s_mean"] == [1.0, 3.0]
     assert out["max_deviation_mean"] == pytest.approx(0.2)  # (0.8, 0.2) is 0.2 m off the segment x = 1
+
+
+# -- goals that stay put (--goal_stay_share) -----------------------------------------------------
+
+@pytest.mark.parametrize("share", [0.0, 0.3, 1.0])
+def test_stay_after_draws_follow_the_share(share):
+    rng_draws = NativeDraws(np.random.default_rng(0))
+    numpy_draws = np.array([events.draw_stay_after(share, rng_draws, None) for _ in range(4000)])
+    jax_draws = np.asarray(jax.vmap(lambda k: events.draw_stay_after(share, DRAWS, k))(
+        jax.random.split(jax.random.PRNGKey(0), 4000)))
+    for drawn in (numpy_draws, jax_draws):
+        stays = drawn[drawn != events.NEVER]
+        assert abs(len(stays) / len(drawn) - share) < 0.03
+        assert set(stays.tolist()) <= set(range(events.STAY_AFTER_MAX + 1))
+        if share:  # every count from 0 to STAY_AFTER_MAX, about equally often
+            counts = np.bincount(stays, minlength=events.STAY_AFTER_MAX + 1)
+            assert counts.min() > 0.8 * len(stays) / (events.STAY_AFTER_MAX + 1)
+
+
+def _arrive(env, stay_after):
+    """Two native steps from a reset whose goal sits 0.3 m ahead (inside the 0.5 m radius), with
+    this episode's goal staying after `stay_after` goals; (goal before, after step 1, after step 2,
+    step infos)."""
+    env.reset(seed=0)
+    env.info["stay_after"] = np.int32(stay_after)
+    env.set_goal(env.data.qpos[:2] + [0.3, 0.0])
+    goals, infos = [env.goal], []
+    for _ in range(2):
+        infos.append(env.step(np.zeros(env.action_size))[4])
+        goals.append(env.goal)
+    return goals, infos
+
+
+def test_a_goal_that_stays_is_not_replaced_and_pays_for_standing_on_it():
+    env = NativeEnv(EnvConfig(task="navigate", goal_stay_share=1.0))
+    assert "stay_after" in env.info
+    goals, infos = _arrive(env, stay_after=0)
+    np.testing.assert_array_equal(goals[0], goals[1])
+    np.testing.assert_array_equal(goals[1], goals[2])
+    assert [info["goals_reached"] for info in infos] == [0, 0]
+    assert [info["terms"]["goal_bonus"] for info in infos] == [1.0, 1.0]  # paid on every step on the goal
+    goals, infos = _arrive(env, stay_after=1)  # the first goal is replaced, as without the setting
+    assert infos[0]["goals_reached"] == 1 and not np.allclose(goals[0], goals[1])
+
+
+def test_stay_goals_leave_waypoints_and_other_tasks_alone():
+    assert "stay_after" not in NativeEnv(EnvConfig(task="navigate")).info
+    path = NativeEnv(EnvConfig(task="navigate", goal_stay_share=1.0, waypoints=((0.3, 0.0), (1.0, 0.0))))
+    assert "stay_after" not in path.info  # a path's last waypoint stays put of itself
+    with pytest.raises(ValueError, match="the goal task has none"):
+        hexa_mjx.make_env(goal_stay_share=0.5)
+    with pytest.raises(ValueError, match=r"goal_stay_share is a share of the episodes in \[0, 1\]"):
+        hexa_mjx.make_env(task="navigate", goal_stay_share=1.5)

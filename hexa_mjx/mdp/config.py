@@ -59,6 +59,12 @@ class EnvConfig:
     # Navigation: the observed distance is capped here (0: goal_max_distance). A policy keeps the
     # cap it was trained with when evaluated on another range.
     goal_distance_cap: float = 0.0  # m
+    # Navigation: chained goals never ask the policy to stop, yet a path's last waypoint does. In
+    # this share of episodes, after 0 to hexa_mjx.mdp.events.STAY_AFTER_MAX goals, the next goal
+    # stays where it is once reached, and the in-radius bonus pays for standing on it.
+    goal_stay_share: float = setting(0.0, "navigate: share of episodes in which, after 0 to 3 random goals, the goal "
+                                          "stays put once reached, so the policy learns to stop and stand at a goal "
+                                          "(waypoint paths: their last waypoint always stays)")
     # Training only: hexa_mjx.mdp.curriculum; on a terrain the level also picks the column of
     # terrain squares an episode starts on (hexa_mjx.mdp.terrain).
     curriculum_levels: int = setting(0, "a curriculum of this many levels (0: none), training only: navigate's "
@@ -140,6 +146,8 @@ def check_config(config: EnvConfig) -> None:
     for name in ("start_joint_noise", "start_yaw_noise"):
         if not 0 <= getattr(config, name) <= math.pi:
             raise ValueError(f"{name} is a range in radians from 0 to pi, got {getattr(config, name)}")
+    if not (math.isfinite(config.goal_stay_share) and 0 <= config.goal_stay_share <= 1):
+        raise ValueError(f"goal_stay_share is a share of the episodes in [0, 1], got {config.goal_stay_share}")
     if not (math.isfinite(config.goal_min_distance) and 0 <= config.goal_min_distance <= config.goal_max_distance):
         raise ValueError(f"the goal distance range needs 0 <= min <= max, got min {config.goal_min_distance} "
                          f"and max {config.goal_max_distance} m")

@@ -36,6 +36,9 @@ def make_episode(config: EnvConfig, observe_as: str = "") -> "Episode":
     config = dataclasses.replace(config, reward=config.reward or next(iter(task_cls.rewards)))
     check_config(config)
     task_cls.check(config)
+    if config.goal_stay_share and not task_cls.chains_goals:
+        raise ValueError(f"goal_stay_share keeps a goal in place among goals that follow one another; the "
+                         f"{task_cls.name} task has none: leave it at 0 (the navigate task has them)")
     if config.reward not in reward_variants():
         raise ValueError(f"unknown reward {config.reward!r}; the {task_cls.name} task's are {list(task_cls.rewards)}")
     if config.reward not in task_cls.rewards:
@@ -84,7 +87,7 @@ class Episode:
                 "air_time": xp.zeros(legs),  # s since each foot last touched the floor
                 "stance_avg": xp.ones(legs),  # running share of time on the floor (all down)
                 "latency": events.draw_latency(self.config.action_latency, draws, draws.fold_in(key, 4)),
-                **self._failure_kind(draws, key), **self._walking(xp),
+                **self._failure_kind(draws, key), **self._walking(xp), **self._stay(draws, key),
                 # the feet's planar positions after the last step, for foot_slip (first step: unused)
                 **({"foot_xy": xp.zeros((legs, 2))} if "foot_slip" in self.active else {})}
 
@@ -116,6 +119,13 @@ class Episode:
     def _walking(self, xp) -> dict:
         """{"asked_m", "walked_m"} of a new episode, when the curriculum measures walking."""
         return {"asked_m": xp.zeros(()), "walked_m": xp.zeros(())} if self.measures_walking else {}
+
+    def _stay(self, draws, key) -> dict:
+        """{"stay_after": goals before the one that stays} of a new episode under goal_stay_share;
+        nothing otherwise, nor on a waypoint path, whose last waypoint stays put of itself."""
+        if not self.config.goal_stay_share or self.config.waypoints:
+            return {}
+        return {"stay_after": events.draw_stay_after(self.config.goal_stay_share, draws, draws.fold_in(key, 10))}
 
     def _failure_kind(self, draws, key) -> dict:
         """{"failure_locked": 0/1} of a new episode under failure_mode "mixed"; nothing otherwise."""
@@ -154,6 +164,8 @@ class Episode:
         dist = xp.linalg.norm(goal - qpos[:2])
         reached = self.task.reached(dist, qpos, heading)
         completed = self.task.goal_completed(reached, info["goals"])
+        if "stay_after" in info:  # this episode's goal stays put once that many were completed
+            completed = completed & (info["goals"] < info["stay_after"])
         stance = self.robot.foot_stance(contacts.geom1, contacts.geom2, contacts.dist)
         air_time = xp.where(stance, 0.0, info["air_time"] + self.dt)
         stance_avg = rewards.running_stance(info["stance_avg"], stance, self.dt)
@@ -201,7 +213,8 @@ class Episode:
         failed = events.draw_failure(self.config, len(self.robot.legs), draws, draws.fold_in(key, 3), rate, p,
                                      self.robot.non_adjacent_pairs)
         latency = events.draw_latency(self.config.action_latency, draws, draws.fold_in(key, 4))
-        kind = {name: xp.where(over, value, info[name]) for name, value in self._failure_kind(draws, key).items()}
+        kind = {name: xp.where(over, value, info[name])
+                for name, value in {**self._failure_kind(draws, key), **self._stay(draws, key)}.items()}
         return {**info, "t": xp.where(over, 0, info["t"]), "success": xp.where(over, 0.0, info["success"]),
                 "goals": xp.where(over, 0, info["goals"]),
                 "failed_legs": xp.where(over, failed, info["failed_legs"]),

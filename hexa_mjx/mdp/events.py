@@ -49,6 +49,19 @@ def push_kick(t, every: int, push_speed: float, draws, key):
     return xp.where((t > 0) & (t % every == 0), speed, 0.0) * xp.stack([xp.cos(angle), xp.sin(angle)])
 
 
+STAY_AFTER_MAX = 3  # goals completed, at most, before the one that stays (--goal_stay_share)
+NEVER = 2**30  # a goal count no episode reaches: every goal is replaced once reached
+
+
+def draw_stay_after(share: float, draws, key):
+    """How many goals an episode completes before its goal stays put once reached: with
+    probability `share`, uniform in 0..STAY_AFTER_MAX; otherwise NEVER."""
+    k_whether, k_after = draws.split(key)
+    xp = draws.xp
+    stays = draws.uniform(k_whether, (), 0.0, 1.0) < share
+    return xp.where(stays, draws.randint(k_after, 0, STAY_AFTER_MAX + 1), NEVER).astype(xp.int32)
+
+
 def draw_latency(max_latency: float, draws, key):
     """An episode's action latency, control steps, uniform in [0, max_latency]."""
     return draws.uniform(key, (), 0.0, max_latency)

@@ -31,6 +31,7 @@ class Task:
     gait_window = "to_goal"  # eval.py's gait analysis reads the walk to the first goal, or "alive" steps
     uses_heading = False  # whether the goal marker's heading is part of the task
     follows_waypoints = False  # whether EnvConfig.waypoints set its goals
+    chains_goals = False  # whether a reached goal is replaced by a new one (EnvConfig.goal_stay_share applies)
     uses_command = False  # whether the task draws commands (the model's userdata)
     has_goal = True  # whether the goal is a place to reach (distance and success figures mean something)
 

@@ -26,6 +26,7 @@ class NavigateTask(Task):
     rewards = {"navigate": {**rewards.GOAL_TERMS, "goal_reached": 400.0, **rewards.SHAPING, "body_contact": -10.0}}
     gait_window = "alive"  # the whole episode is walking
     follows_waypoints = True
+    chains_goals = True
 
     @classmethod
     def check(cls, config) -> None:
