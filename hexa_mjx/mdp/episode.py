@@ -4,7 +4,8 @@
 environment (`hexa_mjx.engines`) each own one and supply only their physics step, their contact
 arrays and their random draws. The episode's bookkeeping is a dict of arrays (`info`), the same in
 both engines: steps taken, success so far, goals completed, the curriculum level, the failed legs,
-each foot's air time and running stance, and the action latency.
+each foot's air time and running stance, the action latency, and after how many goals the goal
+stays put (`--goal_stay_share`).
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """Episode events, written once for both engines: the start state, pushes, latency, failed servos,
-the leg-failure draw, the non-finite check and observation noise.
+the leg-failure draw, the goal that stays put, the non-finite check and observation noise.
 
 Pure functions of NumPy or JAX arrays. Random numbers come from the engine's `draws` (JAX keys in
 MJX, a NumPy generator in native MuJoCo; see `hexa_mjx.engines`), so one line of code draws them in
