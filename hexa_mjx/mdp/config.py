@@ -11,6 +11,8 @@ import math
 from hexa_mjx.robot import constants as robot
 from hexa_mjx.mdp.terrain import KINDS as TERRAINS, LEVEL_TILES
 
+STAY_AFTER_MAX = 3  # goals completed, at most, before the one that stays (goal_stay_share)
+
 
 def setting(default, help: str, **meta):
     """A field with its help (and argparse metadata: choices, nargs, type), shown by every command."""
@@ -60,11 +62,11 @@ class EnvConfig:
     # cap it was trained with when evaluated on another range.
     goal_distance_cap: float = 0.0  # m
     # Navigation: chained goals never ask the policy to stop, yet a path's last waypoint does. In
-    # this share of episodes, after 0 to hexa_mjx.mdp.events.STAY_AFTER_MAX goals, the next goal
-    # stays where it is once reached, and the in-radius bonus pays for standing on it.
-    goal_stay_share: float = setting(0.0, "navigate: share of episodes in which, after 0 to 3 random goals, the goal "
-                                          "stays put once reached, so the policy learns to stop and stand at a goal "
-                                          "(waypoint paths: their last waypoint always stays)")
+    # this share of episodes, after 0 to STAY_AFTER_MAX goals, the next goal stays where it is once
+    # reached, and the in-radius bonus pays for standing on it (hexa_mjx.mdp.events.draw_stay_after).
+    goal_stay_share: float = setting(0.0, f"navigate: share of episodes in which, after 0 to {STAY_AFTER_MAX} random "
+                                          "goals, the goal stays put once reached, so the policy learns to stop and "
+                                          "stand at a goal (waypoint paths: their last waypoint always stays)")
     # Training only: hexa_mjx.mdp.curriculum; on a terrain the level also picks the column of
     # terrain squares an episode starts on (hexa_mjx.mdp.terrain).
     curriculum_levels: int = setting(0, "a curriculum of this many levels (0: none), training only: navigate's "

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from hexa_mjx.mdp.config import STAY_AFTER_MAX
 from hexa_mjx.robot.kinematics import namespace, quat_mul
 from hexa_mjx.robot.model import failed_ctrl
 
@@ -49,7 +50,6 @@ def push_kick(t, every: int, push_speed: float, draws, key):
     return xp.where((t > 0) & (t % every == 0), speed, 0.0) * xp.stack([xp.cos(angle), xp.sin(angle)])
 
 
-STAY_AFTER_MAX = 3  # goals completed, at most, before the one that stays (--goal_stay_share)
 NEVER = 2**30  # a goal count no episode reaches: every goal is replaced once reached
 
 
