@@ -132,6 +132,30 @@ def test_kills_and_sigterms_resume_bit_for_bit(tmp_path, cache_env):
     assert_same_run(stopped, whole)
 
 
+def test_a_longer_run_stopped_between_evaluations_resumes_bit_for_bit(tmp_path, cache_env):
+    """A run continued with a longer schedule (`--resume --num_timesteps`) counts that schedule
+    from where it resumed; stopped between two of its evaluations and resumed again, it goes on
+    exactly, with the rows, checkpoint steps and final params of the same continuation never stopped."""
+    import shutil
+
+    whole, stopped = tmp_path / "whole", tmp_path / "stopped"
+    run("train.py", *EXACT, "--run_dir", str(whole), env=cache_env)  # 384 steps
+    shutil.copytree(whole, stopped)
+    longer = ["--resume", "--num_timesteps", "768"]
+    proc = run("train.py", *EXACT, "--run_dir", str(whole), *longer, env=cache_env)
+    assert "from step 384, not exactly" in proc.stdout, proc.stdout
+
+    proc = run("train.py", *EXACT, "--run_dir", str(stopped), *longer,
+               env={**cache_env, faults.VARIABLE: "update-done@2:TERM"}, check=False)  # 2 updates past 384
+    assert proc.returncode == 143, (proc.returncode, proc.stderr)
+    assert [s for s, _ in checkpoints.list_checkpoints(stopped)][-1] == 512
+    proc = run("train.py", *EXACT, "--run_dir", str(stopped), *longer, env=cache_env)
+    assert "from step 512: exactly" in proc.stdout, proc.stdout
+
+    assert_same_run(stopped, whole)
+    assert checkpoints.list_checkpoints(stopped)[-1][0] == checkpoints.list_checkpoints(whole)[-1][0] == 768
+
+
 def test_two_processes_wait_for_a_slow_evaluation_and_resume_bit_for_bit(tmp_path, cache_env):
     """Process 0's step-192 evaluation made 40 s slow, longer than the 30 s a collective's transport
     waits: the other process waits at a barrier instead. A SIGTERM to process 0 alone stops both at

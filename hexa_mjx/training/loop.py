@@ -160,7 +160,7 @@ def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
     position, environments = None, None
     if start_step > 0:  # resumed from the run's own checkpoint (none is written at step 0)
         saved = exact.shared(saved)
-        position, why = exact.exact_resume(saved, cfg, jax.process_count(), jax.process_index())
+        position, why = exact.exact_resume(saved, cfg, start_step, jax.process_count(), jax.process_index())
         if not position:  # a new schedule, but the same environments: episodes and curriculum levels go on
             environments = exact.saved_environments(saved, cfg, jax.process_count(), jax.process_index())
         if main:
@@ -174,9 +174,10 @@ def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
         return {}
 
     logger = Logger(run_dir, cfg, start_step) if main else None
-    # An exact resume runs the whole run's schedule from its saved position, counting steps from
-    # the run's start; any other resume is a new schedule over the steps left, counted from 0.
-    offset = 0 if position else start_step
+    # A fresh run's schedule counts steps from 0; any resume that is not exact starts a new
+    # schedule over the steps left, counted from where it resumed (the offset); an exact resume
+    # continues its checkpoint's schedule, counted from that schedule's own start.
+    offset = position["origin"] if position else start_step
     schedule = failure_schedule_for(cfg, offset)
 
     # A fresh run evaluates its untrained params if asked; a resumed one its checkpoint's only if
@@ -249,8 +250,9 @@ def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
     if logger:
         logger.compiling(evaluation_first=evaluate_start)
     faults.point("compiling")
-    settings = (ppo_settings(cfg, cfg.num_timesteps, cfg.num_evals, cfg.seed, devices) if position else
-                ppo_settings(cfg, remaining, evals_for(cfg, remaining), cfg.seed + start_step, devices))
+    left = cfg.num_timesteps - offset  # the schedule's steps
+    settings = (ppo_settings(cfg, cfg.num_timesteps, cfg.num_evals, cfg.seed, devices) if position and not offset else
+                ppo_settings(cfg, left, evals_for(cfg, left), cfg.seed + offset, devices))
     extra_loss = None
     if cfg.symmetry_loss:
         obs_maps, act_maps = symmetry.maps_for(env, cfg.symmetry_turns)

@@ -8,7 +8,8 @@ of evaluations run, which sets the evaluator's key. In a multi-process run proce
 process's position (stacked on a first axis by process index) and writes it; on resume it sends
 them back, each process taking its own. A resume from it with the same step budget, evaluation
 count and process count continues exactly: the same rows and the same final params as the run
-that was never stopped (tests/test_crashes.py). A checkpoint without it (written by an earlier
+that was never stopped (tests/test_crashes.py), and so does one written by a run resumed with a
+longer schedule, which continues that schedule. A checkpoint without it (written by an earlier
 version) resumes as before: the same training continued from new keys and new episodes, which the
 resume says.
 
@@ -111,9 +112,14 @@ def shared(saved: tuple[dict, dict] | None) -> tuple[dict, dict] | None:
     return packed, facts
 
 
-def exact_resume(saved, cfg, processes: int = 1, process: int = 0) -> tuple[dict | None, str]:
-    """(ppo.train's `resume` for process `process` of `processes`, with the evaluations run, or
-    None; why not) from a checkpoint's saved (arrays, facts) (None: it has none)."""
+def exact_resume(saved, cfg, step: int, processes: int = 1, process: int = 0) -> tuple[dict | None, str]:
+    """(ppo.train's `resume` for process `process` of `processes`, with the evaluations run and
+    the step its schedule counts from, or None; why not) from the saved (arrays, facts) of the
+    checkpoint at `step` (None: it has none).
+
+    A run resumed with a new schedule (a longer run) counts its position from the step it resumed
+    at, so a checkpoint it writes sits that many steps past its position's own count: that origin
+    is the checkpoint's step less its position's, and the schedule is rebuilt from it."""
     if saved is None:
         return None, "its checkpoint has no saved keys and environments (written by an earlier version)"
     arrays, facts = saved
@@ -122,8 +128,11 @@ def exact_resume(saved, cfg, processes: int = 1, process: int = 0) -> tuple[dict
     if facts["schedule"] != schedule(cfg):
         changed = [k for k, v in schedule(cfg).items() if facts["schedule"].get(k) != v]
         return None, f"{', '.join(changed)} changed since the checkpoint"
+    origin = step - facts["step"]
+    if not 0 <= origin < cfg.num_timesteps:
+        return None, f"its position (step {facts['step']:,}) does not fit its step {step:,}"
     mine = (lambda a: a[process]) if processes > 1 else (lambda a: a)  # noqa: E731
-    return {"step": facts["step"], "interval": facts["interval"], "update": facts["update"],
+    return {"step": facts["step"], "origin": origin, "interval": facts["interval"], "update": facts["update"],
             "local_key": mine(arrays["local_key"]), "key": mine(arrays["key"]) if "key" in arrays else None,
             "env_state": env_leaves(arrays, processes, process), "evaluations": facts["evaluations"]}, ""
 
