@@ -4,6 +4,7 @@ carried across (the last resume runs on 2 processes: process 0 reads and shares 
 
 import dataclasses
 import json
+import shutil
 import signal
 import socket
 
@@ -136,7 +137,6 @@ def test_a_longer_run_stopped_between_evaluations_resumes_bit_for_bit(tmp_path, 
     """A run continued with a longer schedule (`--resume --num_timesteps`) counts that schedule
     from where it resumed; stopped between two of its evaluations and resumed again, it goes on
     exactly, with the rows, checkpoint steps and final params of the same continuation never stopped."""
-    import shutil
 
     whole, stopped = tmp_path / "whole", tmp_path / "stopped"
     run("train.py", *EXACT, "--run_dir", str(whole), env=cache_env)  # 384 steps

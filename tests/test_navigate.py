@@ -123,8 +123,15 @@ def test_waypoints_are_followed_in_order_and_the_last_stays():
     for done in (1, 2):  # after the first waypoint, and once the path is done
         goal = env.task.next_goal(data.qpos, env.goal(data), jp.int32(done), DRAWS, jax.random.PRNGKey(2))
         np.testing.assert_allclose(goal, start + [1.0, 0.0])
-    assert bool(env.task.goal_completed(jp.array(True), jp.int32(1)))
-    assert not bool(env.task.goal_completed(jp.array(True), jp.int32(2)))  # the path is done
+
+
+def test_a_paths_last_waypoint_counts_once_and_stays_the_goal():
+    env = NativeEnv(EnvConfig(task="navigate", waypoints=((0.3, 0.0),)))  # inside the radius at the start
+    env.reset(seed=0)
+    goal = env.goal
+    reached = [env.step(np.zeros(env.action_size))[4]["goals_reached"] for _ in range(3)]
+    assert reached == [1, 1, 1]
+    np.testing.assert_array_equal(env.goal, goal)
 
 
 @pytest.mark.parametrize("overrides, message", [
@@ -251,7 +258,9 @@ def test_a_goal_that_stays_is_not_replaced_and_pays_for_standing_on_it():
 def test_stay_goals_leave_waypoints_and_other_tasks_alone():
     assert "stay_after" not in NativeEnv(EnvConfig(task="navigate")).info
     path = NativeEnv(EnvConfig(task="navigate", goal_stay_share=1.0, waypoints=((0.3, 0.0), (1.0, 0.0))))
-    assert "stay_after" not in path.info  # a path's last waypoint stays put of itself
+    for seed in range(4):  # a path stays after its last waypoint, whatever the share would draw
+        path.reset(seed=seed)
+        assert path.info["stay_after"] == 2
     with pytest.raises(ValueError, match="the goal task has none"):
         hexa_mjx.make_env(goal_stay_share=0.5)
     with pytest.raises(ValueError, match=r"goal_stay_share is a share of the episodes in \[0, 1\]"):

@@ -5,7 +5,7 @@ environment (`hexa_mjx.engines`) each own one and supply only their physics step
 arrays and their random draws. The episode's bookkeeping is a dict of arrays (`info`), the same in
 both engines: steps taken, success so far, goals completed, the curriculum level, the failed legs,
 each foot's air time and running stance, the action latency, and after how many goals the goal
-stays put (`--goal_stay_share`).
+stays put (a waypoint path's length, or a draw under `--goal_stay_share`).
 """
 
 from __future__ import annotations
@@ -122,9 +122,12 @@ class Episode:
         return {"asked_m": xp.zeros(()), "walked_m": xp.zeros(())} if self.measures_walking else {}
 
     def _stay(self, draws, key) -> dict:
-        """{"stay_after": goals before the one that stays} of a new episode under goal_stay_share;
-        nothing otherwise, nor on a waypoint path, whose last waypoint stays put of itself."""
-        if not self.config.goal_stay_share or self.config.waypoints:
+        """{"stay_after": goals completed before the goal stays put once reached} of a new episode:
+        a waypoint path's length (its last waypoint stays), a draw under goal_stay_share, or
+        nothing (goals follow one another to the end)."""
+        if self.config.waypoints:
+            return {"stay_after": draws.xp.asarray(len(self.config.waypoints), draws.xp.int32)}
+        if not self.config.goal_stay_share:
             return {}
         return {"stay_after": events.draw_stay_after(self.config.goal_stay_share, draws, draws.fold_in(key, 10))}
 

@@ -250,9 +250,8 @@ def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
     if logger:
         logger.compiling(evaluation_first=evaluate_start)
     faults.point("compiling")
-    left = cfg.num_timesteps - offset  # the schedule's steps
-    settings = (ppo_settings(cfg, cfg.num_timesteps, cfg.num_evals, cfg.seed, devices) if position and not offset else
-                ppo_settings(cfg, left, evals_for(cfg, left), cfg.seed + offset, devices))
+    left = cfg.num_timesteps - offset  # the schedule's steps: the whole run's for a fresh run and its exact resumes
+    settings = ppo_settings(cfg, left, evals_for(cfg, left), cfg.seed + offset, devices)
     extra_loss = None
     if cfg.symmetry_loss:
         obs_maps, act_maps = symmetry.maps_for(env, cfg.symmetry_turns)
