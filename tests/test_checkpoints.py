@@ -123,6 +123,28 @@ def test_best_is_the_checkpoint_the_evaluations_chose(template, tmp_path):
     assert selection.best_step(tmp_path)[0] == 300
 
 
+def test_a_larger_evaluation_chooses_while_it_covers_the_latest_checkpoint(template, tmp_path):
+    from hexa_mjx.training import checks, reselection, selection
+
+    cfg = config.TrainConfig(task="velocity", reward_scale=["tracking_ang_vel=10"], run_dir=str(tmp_path))
+    (tmp_path / "config.json").write_text(json.dumps(dataclasses.asdict(cfg)))
+    scales = checks.run_scales(cfg)
+    write = lambda name, rows: (tmp_path / name).write_text("".join(json.dumps(r) + "\n" for r in rows))  # noqa: E731
+    write("metrics.jsonl", [velocity_row(s, 0.9, 0.4, falls, scales) for s, falls in ((100, 0.1), (200, 0.0), (300, 0.1))])
+    for step in (100, 200, 300):
+        checkpoints.save_checkpoint(tmp_path, step, template)
+    assert selection.best_step(tmp_path)[0] == 200  # the training evaluations' choice
+    # the larger evaluation of the last two finds a fall at 200 and none at 300
+    write(reselection.SELECTION_FILE, [velocity_row(200, 0.9, 0.4, 0.02, scales), velocity_row(300, 0.9, 0.4, 0.0, scales)])
+    assert [s for s, _ in selection.scored_rows(tmp_path)] == [200, 300]
+    assert checkpoints.resolve_checkpoint(tmp_path / "best")[1].name == "000000000300"
+    # trained on past it: the training evaluations choose again
+    checkpoints.save_checkpoint(tmp_path, 400, template)
+    write("metrics.jsonl", [velocity_row(s, 0.9, 0.4, falls, scales)
+                            for s, falls in ((100, 0.1), (200, 0.0), (300, 0.1), (400, 0.05))])
+    assert selection.best_step(tmp_path)[0] == 200
+
+
 def test_best_of_a_run_without_evaluated_checkpoints_says_what_to_do(tmp_path):
     (tmp_path / "config.json").write_text(json.dumps(dataclasses.asdict(config.TrainConfig(run_dir=str(tmp_path)))))
     with pytest.raises(FileNotFoundError, match="pass the run directory"):

@@ -6,6 +6,7 @@ import os
 import re
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -19,7 +20,7 @@ from hexa_mjx.evaluation import evaluate as evaluation, video
 from hexa_mjx.evaluation import table
 from hexa_mjx.tasks import TASKS
 
-from conftest import NOISE, TINY, run  # noqa: E402  (the shared tiny run: tests/conftest.py)
+from conftest import NOISE, ROOT, TINY, run  # noqa: E402  (the shared tiny run: tests/conftest.py)
 
 
 def rows(run_dir):
@@ -141,6 +142,30 @@ def test_init_noise_std_sets_the_untrained_policys_action_noise(noise_std):
     mean = networks.make_inference(cfg, env, params)(obs, jax.random.PRNGKey(0))
     sampled = networks.make_inference(cfg, env, params, deterministic=False)(obs, jax.random.PRNGKey(1))
     np.testing.assert_allclose(np.std(np.asarray(sampled - mean)), noise_std, rtol=0.03)
+
+
+def test_reselection_evaluates_the_last_checkpoints_again_and_best_follows(trained, tmp_path, cache_env):
+    from hexa_mjx.tasks import task_class
+    from hexa_mjx.training import checks, reselection, selection
+
+    run_dir = tmp_path / "run"
+    shutil.copytree(trained[0], run_dir)
+    run("train.py", "--run_dir", str(run_dir), "--resume", "--num_timesteps", "192", "--num_evals", "3", env=cache_env)
+    assert [s for s, _ in checkpoints.list_checkpoints(run_dir)] == [64, 128, 192]
+    reselect = [sys.executable, "-m", "hexa_mjx.training.reselection", str(run_dir), "--last", "2", "--episodes", "4"]
+    proc = subprocess.run(reselect, capture_output=True, text=True, cwd=ROOT, env=cache_env, timeout=900)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    rows = reselection.read_selection(run_dir)
+    assert [(r["step"], r["episodes"], r["seed"]) for r in rows] == [(128, 4, 4), (192, 4, 4)]  # seed 3's run: 4
+    cfg = config.load_config(run_dir)
+    scores = [task_class(cfg.task).selection_score(r, checks.run_scales(cfg)) for r in rows]
+    chosen = rows[1]["step"] if scores[1] >= scores[0] else rows[0]["step"]
+    assert selection.best_step(run_dir)[0] == chosen
+    assert f"is now step {chosen:,}" in proc.stdout
+    # the same episodes again: the same figures
+    again = subprocess.run(reselect, capture_output=True, text=True, cwd=ROOT, env=cache_env, timeout=900)
+    assert again.returncode == 0, again.stderr
+    assert reselection.read_selection(run_dir) == rows
 
 
 def test_eval_writes_video_and_metrics(trained, cache_env, tmp_path):

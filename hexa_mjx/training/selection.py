@@ -9,7 +9,8 @@ read from those rows whenever it is asked for; nothing extra is written during t
 guards against a policy that became unstable late in a run (docs/RESULTS.md, "The
 evaluation-chosen checkpoint"). Ties go to the later checkpoint. The score comes from the run's
 own evaluation episodes (`--num_eval_envs`, 32 by default), so measure the chosen checkpoint with
-eval.py's larger evaluation before trusting it.
+eval.py's larger evaluation before trusting it; `python -m hexa_mjx.training.reselection RUN`
+evaluates the last checkpoints again over more episodes, and the choice is then made among those.
 """
 
 from __future__ import annotations
@@ -21,15 +22,19 @@ from pathlib import Path
 def scored_rows(run_dir: Path) -> list[tuple[int, float]]:
     """(step, score) of each evaluation row of a run that has a complete checkpoint, in step order."""
     from hexa_mjx.tasks import task_class
-    from hexa_mjx.training import checks, config
+    from hexa_mjx.training import checks, config, reselection
     from hexa_mjx.training.checkpoints import list_checkpoints
     from hexa_mjx.training.progress import read_rows
 
     cfg = config.load_config(run_dir)
     task, scales = task_class(cfg.task), checks.run_scales(cfg)
     saved = {step for step, _ in list_checkpoints(run_dir)}
+    rows = read_rows(run_dir)[0]
+    larger = reselection.read_selection(run_dir)
+    if saved and max(saved) in {row["step"] for row in larger}:  # while it covers the latest checkpoint
+        rows = larger
     scores = {}
-    for row in read_rows(run_dir)[0]:
+    for row in rows:
         if row["step"] in saved:
             score = float(task.selection_score(row, scales))
             scores[row["step"]] = score if math.isfinite(score) else -math.inf
