@@ -138,6 +138,9 @@ def test_a_larger_evaluation_chooses_while_it_covers_the_latest_checkpoint(templ
     write(reselection.SELECTION_FILE, [velocity_row(200, 0.9, 0.4, 0.02, scales), velocity_row(300, 0.9, 0.4, 0.0, scales)])
     assert [s for s, _ in selection.scored_rows(tmp_path)] == [200, 300]
     assert checkpoints.resolve_checkpoint(tmp_path / "best")[1].name == "000000000300"
+    with open(tmp_path / reselection.SELECTION_FILE, "a") as f:  # a damaged line is left out
+        f.write('{"step": 3')
+    assert selection.best_step(tmp_path)[0] == 300
     # trained on past it: the training evaluations choose again
     checkpoints.save_checkpoint(tmp_path, 400, template)
     write("metrics.jsonl", [velocity_row(s, 0.9, 0.4, falls, scales)

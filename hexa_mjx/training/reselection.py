@@ -67,11 +67,18 @@ def reselect(run_dir: Path, last: int = 4, episodes: int = 256, seed: int | None
 
 
 def read_selection(run_dir: Path) -> list[dict]:
-    """RUN/selection.jsonl's rows, none when the file is missing."""
+    """RUN/selection.jsonl's rows, none when the file is missing; a line that is not a row (a hand
+    edit gone wrong) is left out."""
     path = Path(run_dir) / SELECTION_FILE
-    if not path.is_file():
-        return []
-    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    rows = []
+    for line in path.read_text(errors="replace").splitlines() if path.is_file() else []:
+        try:
+            row = json.loads(line)
+        except json.JSONDecodeError:
+            continue
+        if isinstance(row, dict) and isinstance(row.get("step"), int):
+            rows.append(row)
+    return rows
 
 
 def main(argv=None) -> None:
