@@ -84,6 +84,14 @@ HOST_ONLY = ("run_dir", "resume", "progress", "record_optimizer", "compile_cache
              "coordinator_timeout")  # config fields no compiled program depends on
 
 
+def evaluator_for(cfg: TrainConfig, eval_env, randomization_fn, template, episodes: int, seed: int, done: int = 0,
+                  programs=None) -> RunEvaluator:
+    """The run's evaluation (`RunEvaluator`) of `episodes` deterministic episodes from `seed`,
+    wrapped as training wraps its own environments: what its rows and `RUN/best` are scored on."""
+    return RunEvaluator(eval_env, wrap_env_fn(eval_env, cfg.randomize), randomization_fn, policy_maker(cfg, eval_env),
+                        template, episodes, cfg.episode_length, seed=seed, done=done, programs=programs)
+
+
 def program_description(cfg: TrainConfig, offset: int) -> dict:
     """What a run's environments, wrappers and networks are made from, as `program_store` keys its
     compiled programs: the config less its host-only fields, and the step its counts start from."""
@@ -185,11 +193,8 @@ def run(cfg: TrainConfig, main: bool, on_eval=None, stop=None) -> dict:
     evaluate_start = not row_kept and (cfg.eval_at_start or start_step > 0) and not position
     randomization_fn = randomization.randomization_fn(env) if cfg.randomize else None
     programs = program_description(cfg, offset)  # what the kept compiled programs are keyed by
-    evaluator = RunEvaluator(eval_env, wrap_env_fn(eval_env, cfg.randomize), randomization_fn,
-                             policy_maker(cfg, eval_env), template, cfg.num_eval_envs,
-                             cfg.episode_length, seed=cfg.seed + offset,
-                             done=position["evaluations"] if position else 0,
-                             programs=programs) if main else None
+    evaluator = evaluator_for(cfg, eval_env, randomization_fn, template, cfg.num_eval_envs, seed=cfg.seed + offset,
+                              done=position["evaluations"] if position else 0, programs=programs) if main else None
 
     def on_interval(step, make_policy, params, adam, env_state, at):  # before training, after each interval
         first = step == start_step - offset

@@ -68,10 +68,17 @@ def summarize(metrics: dict) -> dict:
     }
 
 
-def read_rows(run_dir: Path) -> tuple[list[dict], int]:
-    """metrics.jsonl's evaluation rows in file order (none without the file), and how many other
-    non-empty lines it has (cut short by a crash, or damaged)."""
-    path = Path(run_dir) / "metrics.jsonl"
+def evaluation_figures(metrics: dict) -> dict:
+    """An evaluation row's figures: `summarize`'s, each reward term's per-episode sum, and the
+    curriculum's and failure schedule's, where `metrics` has them."""
+    return {**summarize(metrics), **{k: float(v) for k, v in metrics.items()
+                                     if k.startswith(("eval/episode_reward/", "curriculum/", "leg_failure/"))}}
+
+
+def read_rows(run_dir: Path, name: str = "metrics.jsonl") -> tuple[list[dict], int]:
+    """The evaluation rows of the run's `name` (metrics.jsonl) in file order (none without the
+    file), and how many other non-empty lines it has (cut short by a crash, or damaged)."""
+    path = Path(run_dir) / name
     rows, dropped = [], 0
     for line in path.read_text(errors="replace").splitlines() if path.is_file() else []:
         try:
@@ -176,9 +183,7 @@ class Logger:
         rate = done / elapsed if done > 0 and elapsed > 0 else math.nan
         evaluation_s = time.time() - self.this_evaluation_t0 if self.this_evaluation_t0 is not None else math.nan
         row = {"step": step, "walltime_s": round(elapsed, 2), "evaluation_s": round(evaluation_s, 2),
-               "env_steps_per_s": rate, **summarize(metrics),
-               **{k: float(v) for k, v in metrics.items()
-                  if k.startswith(("eval/episode_reward/", "curriculum/", "leg_failure/"))}}
+               "env_steps_per_s": rate, **evaluation_figures(metrics)}
         try:
             with open(self.path, "a") as f:
                 f.write(json.dumps(row) + "\n")

@@ -26,16 +26,15 @@ def reselect(run_dir: Path, last: int = 4, episodes: int = 256, seed: int | None
     """Evaluate the run's last `last` checkpoints over `episodes` episodes each and write their rows
     (step, episodes, seed, score and the training row's figures) to RUN/selection.jsonl."""
     from hexa_mjx import atomic
-    from hexa_mjx.evaluation.run_evaluator import RunEvaluator
     from hexa_mjx.mdp import randomization
     from hexa_mjx.tasks import task_class
     from hexa_mjx.training import checks
     from hexa_mjx.training.checkpoints import list_checkpoints, load_checkpoint
     from hexa_mjx.training.config import load_config, make_env_for
     from hexa_mjx.training.jax_setup import prepare_jax
-    from hexa_mjx.training.loop import program_description, wrap_env_fn
-    from hexa_mjx.training.networks import policy_maker, templates
-    from hexa_mjx.training.progress import summarize
+    from hexa_mjx.training.loop import evaluator_for, program_description
+    from hexa_mjx.training.networks import templates
+    from hexa_mjx.training.progress import evaluation_figures
     from hexa_mjx.training.run_lock import RunLock
 
     run_dir = Path(run_dir)
@@ -49,15 +48,13 @@ def reselect(run_dir: Path, last: int = 4, episodes: int = 256, seed: int | None
         env = make_env_for(cfg)
         template, _ = templates(cfg, env)
         randomization_fn = randomization.randomization_fn(env) if cfg.randomize else None
-        evaluator = RunEvaluator(env, wrap_env_fn(env, cfg.randomize), randomization_fn, policy_maker(cfg, env),
-                                 template, episodes, cfg.episode_length, seed=seed,
-                                 programs=program_description(cfg, 0))  # kept: a second call compiles nothing
+        evaluator = evaluator_for(cfg, env, randomization_fn, template, episodes, seed,
+                                  programs=program_description(cfg, 0))  # kept: a second call compiles nothing
         task, scales = task_class(cfg.task), checks.run_scales(cfg)
         rows = []
         for step, path in found:
             metrics = evaluator(load_checkpoint(path, template)[1])
-            row = {"step": step, "episodes": episodes, "seed": seed, **summarize(metrics),
-                   **{k: float(v) for k, v in metrics.items() if k.startswith("eval/episode_reward/")}}
+            row = {"step": step, "episodes": episodes, "seed": seed, **evaluation_figures(metrics)}
             row["score"] = float(task.selection_score(row, scales))
             rows.append(row)
             print(f"step {step:>12,}: score {row['score']:.4f}, falls {row['fall_rate']:.2%} "
@@ -68,24 +65,18 @@ def reselect(run_dir: Path, last: int = 4, episodes: int = 256, seed: int | None
 
 def read_selection(run_dir: Path) -> list[dict]:
     """RUN/selection.jsonl's rows, none when the file is missing; a line that is not a row (a hand
-    edit gone wrong) is left out."""
-    path = Path(run_dir) / SELECTION_FILE
-    rows = []
-    for line in path.read_text(errors="replace").splitlines() if path.is_file() else []:
-        try:
-            row = json.loads(line)
-        except json.JSONDecodeError:
-            continue
-        if isinstance(row, dict) and isinstance(row.get("step"), int):
-            rows.append(row)
-    return rows
+    edit gone wrong) is left out, as metrics.jsonl's are."""
+    from hexa_mjx.training.progress import read_rows
+
+    return read_rows(run_dir, SELECTION_FILE)[0]
 
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(prog="python -m hexa_mjx.training.reselection", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("run_dir", type=Path, help="the run directory")
-    parser.add_argument("--last", type=int, default=4, help="how many of its latest checkpoints to evaluate (default 4)")
+    parser.add_argument("--last", type=int, default=4,
+                        help="how many of its latest checkpoints to evaluate (default 4)")
     parser.add_argument("--episodes", type=int, default=256, help="episodes per checkpoint (default 256)")
     parser.add_argument("--seed", type=int, default=None, help="the episodes' seed (default: the run's seed + 1)")
     args = parser.parse_args(argv)

@@ -29,10 +29,9 @@ def scored_rows(run_dir: Path) -> list[tuple[int, float]]:
     cfg = config.load_config(run_dir)
     task, scales = task_class(cfg.task), checks.run_scales(cfg)
     saved = {step for step, _ in list_checkpoints(run_dir)}
-    rows = read_rows(run_dir)[0]
-    larger = reselection.read_selection(run_dir)
-    if saved and max(saved) in {row["step"] for row in larger}:  # while it covers the latest checkpoint
-        rows = larger
+    rows = reselection.read_selection(run_dir)
+    if not saved or max(saved) not in {row["step"] for row in rows}:  # it chooses while it covers the latest
+        rows = read_rows(run_dir)[0]
     scores = {}
     for row in rows:
         if row["step"] in saved:
