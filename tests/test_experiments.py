@@ -182,6 +182,38 @@ def test_seed_summary_reads_navigations_worst_sector_or_band(tmp_path):
     assert math.isnan(seed_summary.figures({"summary": {"fall_rate": 0.0}})["worst sector or band"])
 
 
+def test_seed_summary_marks_the_figures_that_miss_the_tasks_targets(tmp_path, capsys):
+    from hexa_mjx.studies import seed_summary
+
+    # (fall rate, feet-only share, worst cell's success): seed 1 falls in 3%, seed 2 lacks the cells
+    per_seed = [(0.01, 0.995, 1.0), (0.03, 0.995, 1.0), (0.0, 0.999, None)]
+    files = []
+    for seed, (fall, feet, cell) in enumerate(per_seed):
+        navigation = {"sectors": {"+0 deg": {"goals": 9, "success": cell}}} if cell is not None else {}
+        files.append(tmp_path / f"nav-s{seed}" / "eval256" / "metrics.json")
+        files[-1].parent.mkdir(parents=True)
+        files[-1].write_text(json.dumps({"config": {"task": "navigate"}, "summary": {
+            "success_rate": 1.0, "fall_rate": fall, "feet_only_steps": feet, "navigation": navigation}}))
+    seed_summary.main(["--targets"] + [str(f) for f in files])
+    out = capsys.readouterr().out
+    assert "| nav-s0 | 100.00 | 99.00 | 99.50 | 100.00 |" in out
+    assert "| nav-s1 | 100.00 | 97.00* | 99.50 | 100.00 |" in out
+    assert "| target |  | >= 98.00 | >= 99.00 | >= 95.00 |" in out
+    assert "every target on 1 of 3 runs (nav-s0)" in out  # a figure the run lacks counts as a miss
+    assert seed_summary.misses({"planar RMS error": 0.11, "no fall": 99.0}, {"planar RMS error": ("<=", 0.10)}) \
+        == ["planar RMS error"]
+    from hexa_mjx.tasks import TASKS
+
+    known = {name for name, *_ in seed_summary.FIGURES}
+    for cls in TASKS.values():  # every task's targets name figures the table has, with a sense and a bound
+        assert set(cls.targets) <= known and all(sense in (">=", "<=") for sense, _ in cls.targets.values())
+    other = tmp_path / "goal.json"
+    other.write_text(json.dumps({"task": "goal", "summary": {"success_rate": 1.0, "fall_rate": 0.0}}))
+    with pytest.raises(SystemExit):  # two tasks, and the report's task has no targets here
+        seed_summary.main(["--targets", str(files[0]), str(other)])
+    assert "--targets needs evaluations of one task with targets (navigate, velocity)" in capsys.readouterr().err
+
+
 def seed_files(tmp_path, pattern: str, per_seed: list) -> list:
     """One JSON file per seed at tmp_path / pattern.format(seed), each holding that seed's rows."""
     files = []

@@ -3,11 +3,14 @@ interquartile range and the worst seed (rliable's way of reporting few runs: Aga
 
     python -m hexa_mjx.studies.seed_summary runs/velocity-s*/eval256/metrics.json
     python -m hexa_mjx.studies.seed_summary runs/velocity-s*/native.json --json summary.json
+    python -m hexa_mjx.studies.seed_summary --targets runs/nav-s*/eval256/metrics.json
     python -m hexa_mjx.studies.seed_summary --battery runs/gen-s*/battery-mjx.json
     python -m hexa_mjx.studies.seed_summary --legs runs/legfail-s*/sweep-leg.json
 
 Reads eval.py's metrics.json and play.py's --json files alike; a figure one of them lacks is "-".
 Navigation's evaluations add the worst 45-degree sector or distance band and the goals per episode.
+With --targets, a `*` marks each figure that misses the task's targets (`Task.targets`) and a last
+line counts the runs that meet every one.
 With --battery, the files are the generalist battery's (`hexa_mjx.studies.generalist --json`), and
 the table has one row per condition: each seed's path completion, the median, IQR and worst, and
 how many seeds meet the condition's target. With --legs, they are leg-failure sweeps
@@ -99,18 +102,36 @@ def _cell(name: str, value: float) -> str:
     return "-" if not math.isfinite(value) else (f"{value:.2f}" if name in SHARES else f"{value:.3f}")
 
 
-def table(labels: list[str], rows: list[dict]) -> str:
-    """A markdown table: one row per run, then median, IQR and worst, of the figures any run has."""
+def misses(row: dict, targets: dict[str, tuple[str, float]]) -> list[str]:
+    """The figures of `row` that miss `targets` (a task's: name -> (">=" or "<=", bound)); a figure
+    the row lacks misses."""
+    return [name for name, (sense, bound) in targets.items()
+            if not (math.isfinite(row.get(name, math.nan))
+                    and (row[name] >= bound if sense == ">=" else row[name] <= bound))]
+
+
+def table(labels: list[str], rows: list[dict], targets: dict | None = None) -> str:
+    """A markdown table: one row per run, then median, IQR and worst, of the figures any run has.
+    With `targets` (a task's), a `*` marks each figure that misses its target, a target row follows
+    and a last line counts the runs that meet every one."""
     stats = summarize(rows)
     names = [n for n, *_ in FIGURES if n in stats]
     units = {n: u for n, _, u, _ in FIGURES}
+    missed = [misses(r, targets or {}) for r in rows]
     lines = ["| run | " + " | ".join(f"{n} ({units[n]})" if units[n] else n for n in names) + " |",
              "|---" * (len(names) + 1) + "|"]
-    lines += [f"| {label} | " + " | ".join(_cell(n, r[n]) for n in names) + " |" for label, r in zip(labels, rows)]
+    lines += [f"| {label} | " + " | ".join(_cell(n, r[n]) + ("*" if n in m else "") for n in names) + " |"
+              for label, r, m in zip(labels, rows, missed)]
     lines.append("| median | " + " | ".join(_cell(n, stats[n]["median"]) for n in names) + " |")
     lines.append("| IQR | " + " | ".join(f"{_cell(n, stats[n]['q25'])} to {_cell(n, stats[n]['q75'])}"
                                          for n in names) + " |")
     lines.append("| worst | " + " | ".join(_cell(n, stats[n]["worst"]) for n in names) + " |")
+    if targets:
+        lines.append("| target | " + " | ".join(f"{targets[n][0]} {_cell(n, targets[n][1])}" if n in targets else ""
+                                                for n in names) + " |")
+        meeting = [label for label, m in zip(labels, missed) if not m]
+        lines.append(f"\nevery target on {len(meeting)} of {len(rows)} runs"
+                     + (f" ({', '.join(meeting)})" if meeting else "") + "; `*`: the run misses that target")
     return "\n".join(lines)
 
 
@@ -211,9 +232,14 @@ def main(argv=None) -> None:
                         help="the files are generalist batteries (python -m hexa_mjx.studies.generalist --json)")
     parser.add_argument("--legs", action="store_true",
                         help="the files are leg-failure sweeps (python -m hexa_mjx.studies.leg_failure_sweep --out)")
+    parser.add_argument("--targets", action="store_true",
+                        help="mark the figures that miss the task's targets and count the runs that meet every "
+                             "one (for the task's own evaluation: eval.py over 256 episodes, no waypoints)")
     args = parser.parse_args(argv)
     if args.battery and args.legs:
         parser.error("--battery and --legs read different files: give one of them")
+    if args.targets and (args.battery or args.legs):
+        parser.error("--targets applies to evaluation files; the battery and the sweep mark their own targets")
     missing = [str(f) for f in args.files if not f.is_file()]
     if missing:
         parser.error(f"no such file: {', '.join(missing)} (give eval.py's metrics.json or play.py's --json output)")
@@ -228,9 +254,20 @@ def main(argv=None) -> None:
         except ValueError as e:
             parser.error(str(e))
         return
-    rows = [figures(json.loads(f.read_text())) for f in args.files]
+    docs = [json.loads(f.read_text()) for f in args.files]
+    rows = [figures(doc) for doc in docs]
     labels = [label_of(f) for f in args.files]
-    print(table(labels, rows))
+    targets = None
+    if args.targets:
+        from hexa_mjx.tasks import TASKS
+
+        tasks = {task_of(doc) for doc in docs}
+        if len(tasks) != 1 or not getattr(TASKS.get(next(iter(tasks))), "targets", None):
+            with_targets = sorted(name for name, cls in TASKS.items() if cls.targets)
+            parser.error(f"--targets needs evaluations of one task with targets ({', '.join(with_targets)}); "
+                         f"these are of {sorted(map(str, tasks))}")
+        targets = TASKS[tasks.pop()].targets
+    print(table(labels, rows, targets))
     if args.json:
         args.json.write_text(json.dumps({"runs": dict(zip(labels, rows)), "summary": summarize(rows)}, indent=2))
 

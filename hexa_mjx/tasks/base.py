@@ -34,6 +34,9 @@ class Task:
     chains_goals = False  # whether a reached goal is replaced by a new one (EnvConfig.goal_stay_share applies)
     uses_command = False  # whether the task draws commands (the model's userdata)
     has_goal = True  # whether the goal is a place to reach (distance and success figures mean something)
+    # What a seed of the task's recipe must reach in eval.py's 256 episodes (its issue's targets):
+    # a figure of hexa_mjx.studies.seed_summary -> (">=" or "<=", bound in that figure's unit).
+    targets: dict[str, tuple[str, float]] = {}
 
     def __init__(self, config, robot):
         self.config, self.robot = config, robot

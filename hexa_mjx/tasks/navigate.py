@@ -27,6 +27,7 @@ class NavigateTask(Task):
     gait_window = "alive"  # the whole episode is walking
     follows_waypoints = True
     chains_goals = True
+    targets = {"no fall": (">=", 98.0), "feet only": (">=", 99.0), "worst sector or band": (">=", 95.0)}
 
     @classmethod
     def check(cls, config) -> None:

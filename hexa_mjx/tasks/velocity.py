@@ -76,6 +76,8 @@ class VelocityTask(Task):
     gait_window = "alive"
     uses_command = True
     has_goal = False
+    targets = {"planar RMS error": ("<=", 0.10), "yaw-rate RMS error": ("<=", 0.25),
+               "drift told to stand": ("<=", 0.05), "no fall": (">=", 98.0), "feet only": (">=", 99.0)}
 
     @classmethod
     def check(cls, config) -> None:
