@@ -197,6 +197,28 @@ def test_goal_records_from_a_hand_made_walk():
     assert summary["speed_to_goal_body_lengths"] == pytest.approx(0.5, rel=0.01)
 
 
+def test_falls_walking_to_a_goal_are_told_from_falls_on_a_goal_that_stays():
+    # Three walks 2 m toward +x at 0.01 m/s per step (0.1 s each). Episode 0 falls after 60 steps,
+    # 1.4 m short; episode 1 arrives (within 0.5 m at step 150), is never credited (its goal
+    # stays) and falls standing there at step 180; episode 2 arrives and does not fall.
+    qpos, goal, completed = _straight_walk((2.0, 0.0), 0.0, steps=200, speed_per_step=0.01)
+    qpos, goal = np.repeat(qpos, 3, axis=1), np.repeat(goal, 3, axis=1)
+    completed = np.concatenate([np.zeros((200, 2)), completed], axis=1)
+    alive = np.ones((200, 3))
+    alive[60:, 0] = alive[180:, 1] = 0
+    fell = np.array([True, True, False])
+    start = np.zeros((3, qpos.shape[-1]))
+    start[:, 3] = 1.0
+    records = nav_metrics.goals_of_episodes(start, qpos, goal, completed, alive, fell, dt=0.1)
+    assert [r["closest"] for r in records[:2]] == [pytest.approx(1.4), pytest.approx(0.2)]
+    falls = nav_metrics.fall_phases(records, fell, alive, success_radius=0.5, dt=0.1)
+    assert falls == {"walking_to_a_goal": 1, "on_a_goal": 1, "seconds_median": pytest.approx(12.0)}
+    assert nav_metrics.fall_phases(records[2:], fell[2:], alive[:, 2:], 0.5, 0.1)["seconds_median"] is None
+    rows = dict(nav_metrics.table_rows({"navigation": {**nav_metrics.navigation_summary(records, 3, 0.5, 0.2, 0.5, 3.0),
+                                                       "falls": falls}}))
+    assert rows["falls: walking to a goal, on a goal (median time)"] == "1, 1 (12.0 s)"
+
+
 def test_path_deviation_and_arrivals():
     # Corners at (1, 0) then (1, 1); the torso cuts 0.2 m inside the corner on the way.
     xy = np.array([[0.5, 0.0], [0.9, 0.0], [1.0, 0.1], [0.8, 0.2], [1.0, 0.6], [1.0, 1.0], [1.0, 1.0]])

@@ -32,7 +32,8 @@ def goals_of_episodes(start_qpos, qpos, goal, completed, alive, fell, dt: float)
     qpos (T, N, nq): state after each step; goal (T, N, 2): the goal each step was scored against;
     completed (T, N): 1 on the step a goal was completed; alive (T, N): 1 inside the episode.
     A goal is drawn at the start or on the step its predecessor is completed; it counts as given
-    if the episode has at least one step left for it.
+    if the episode has at least one step left for it. `closest`: the torso's least distance to it
+    (m), which tells a goal that stays, never completed, from one never reached.
     """
     steps, episodes = alive.shape
     records = []
@@ -49,8 +50,10 @@ def goals_of_episodes(start_qpos, qpos, goal, completed, alive, fell, dt: float)
             offset = target - where[:2]
             bearing = wrap_deg(np.degrees(np.arctan2(offset[1], offset[0]) - heading(where)))
             reached = k < len(events)
+            last = events[k] if reached else length - 1
+            closest = np.linalg.norm(qpos[first:last + 1, i, :2] - target, axis=-1).min()
             record = {"episode": i, "index": k, "bearing_deg": float(bearing),
-                      "distance": float(np.linalg.norm(offset)), "reached": reached,
+                      "distance": float(np.linalg.norm(offset)), "closest": float(closest), "reached": reached,
                       "fell": bool(fell[i]) and not reached}
             if reached:
                 arrive = events[k]
@@ -60,6 +63,17 @@ def goals_of_episodes(start_qpos, qpos, goal, completed, alive, fell, dt: float)
                               heading_error_deg=float(abs(wrap_deg(np.degrees(heading(pos)) - to_goal))))
             records.append(record)
     return records
+
+
+def fall_phases(records: list[dict], fell, alive, success_radius: float, dt: float) -> dict:
+    """Where the episodes that fell did so: walking to a goal (the goal in force never within
+    `success_radius`, m) or on a goal (standing on one that stays, or on an arrival's last step);
+    and the median time of a fall, s into the episode (None without falls)."""
+    fell = np.asarray(fell, bool)
+    walking = {r["episode"] for r in records if r["fell"] and r["closest"] >= success_radius}
+    seconds = np.asarray(alive)[:, fell].sum(0) * dt
+    return {"walking_to_a_goal": len(walking), "on_a_goal": int(fell.sum()) - len(walking),
+            "seconds_median": float(np.median(seconds)) if fell.any() else None}
 
 
 def sector_of(bearing_deg) -> np.ndarray:
@@ -170,6 +184,11 @@ def table_rows(summary: dict) -> list[tuple[str, str]]:
                  ("speed toward the goal", f"{num(nav['speed_to_goal'], '.3f')} m/s = "
                                            f"{num(nav['speed_to_goal_body_lengths'], '.2f')} torso lengths/s"),
                  ("heading error on arrival, mean", f"{num(nav['heading_error_deg_mean'], '.0f')} deg")]
+        if "falls" in nav:  # evaluations written before the breakdown lack it
+            falls = nav["falls"]
+            rows.append(("falls: walking to a goal, on a goal (median time)",
+                         f"{falls['walking_to_a_goal']}, {falls['on_a_goal']} "
+                         f"({num(falls['seconds_median'], '.1f')} s)"))
     if "waypoints" in summary:
         path = summary["waypoints"]
         rows += [("waypoints", " ".join(f"{x:g},{y:g}" for x, y in path["waypoints"])),

@@ -118,6 +118,7 @@ class NavigateTask(Task):
         summary = nav_metrics.navigation_summary(records, alive.shape[1], self.config.success_radius,
                                                  nav_metrics.body_length(env), self.config.goal_min_distance,
                                                  self.config.goal_max_distance)
+        summary["falls"] = nav_metrics.fall_phases(records, fell, alive, self.config.success_radius, env.dt)
         return {"navigation": summary}, {"goals": records}
 
     def plot(self, env, start_qpos, traj, out):
