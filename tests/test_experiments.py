@@ -194,8 +194,10 @@ def test_seed_summary_marks_the_figures_that_miss_the_tasks_targets(tmp_path, ca
         files[-1].parent.mkdir(parents=True)
         files[-1].write_text(json.dumps({"config": {"task": "navigate"}, "summary": {
             "success_rate": 1.0, "fall_rate": fall, "feet_only_steps": feet, "navigation": navigation}}))
-    seed_summary.main(["--targets"] + [str(f) for f in files])
+    seed_summary.main(["--targets"] + [str(f) for f in files] + ["--json", str(tmp_path / "s.json")])
     out = capsys.readouterr().out
+    assert json.loads((tmp_path / "s.json").read_text())["misses"] == {
+        "nav-s0": [], "nav-s1": ["no fall"], "nav-s2": ["worst sector or band"]}
     assert "| nav-s0 | 100.00 | 99.00 | 99.50 | 100.00 |" in out
     assert "| nav-s1 | 100.00 | 97.00* | 99.50 | 100.00 |" in out
     assert "| target |  | >= 98.00 | >= 99.00 | >= 95.00 |" in out

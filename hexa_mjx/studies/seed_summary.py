@@ -269,7 +269,10 @@ def main(argv=None) -> None:
         targets = TASKS[tasks.pop()].targets
     print(table(labels, rows, targets))
     if args.json:
-        args.json.write_text(json.dumps({"runs": dict(zip(labels, rows)), "summary": summarize(rows)}, indent=2))
+        out = {"runs": dict(zip(labels, rows)), "summary": summarize(rows)}
+        if targets:  # each run's figures that miss their target
+            out["misses"] = {label: misses(row, targets) for label, row in zip(labels, rows)}
+        args.json.write_text(json.dumps(out, indent=2))
 
 
 if __name__ == "__main__":
