@@ -262,11 +262,12 @@ def main(argv=None) -> None:
         from hexa_mjx.tasks import TASKS
 
         tasks = {task_of(doc) for doc in docs}
-        if len(tasks) != 1 or not getattr(TASKS.get(next(iter(tasks))), "targets", None):
+        task = TASKS.get(next(iter(tasks))) if len(tasks) == 1 else None
+        if task is None or not task.targets:
             with_targets = sorted(name for name, cls in TASKS.items() if cls.targets)
             parser.error(f"--targets needs evaluations of one task with targets ({', '.join(with_targets)}); "
                          f"these are of {sorted(map(str, tasks))}")
-        targets = TASKS[tasks.pop()].targets
+        targets = task.targets
     print(table(labels, rows, targets))
     if args.json:
         out = {"runs": dict(zip(labels, rows)), "summary": summarize(rows)}
