@@ -68,12 +68,18 @@ def goals_of_episodes(start_qpos, qpos, goal, completed, alive, fell, dt: float)
 def fall_phases(records: list[dict], fell, alive, success_radius: float, dt: float) -> dict:
     """Where the episodes that fell did so: walking to a goal (the goal in force never within
     `success_radius`, m) or on a goal (standing on one that stays, or on an arrival's last step);
-    and the median time of a fall, s into the episode (None without falls)."""
+    the median time of a fall, s into the episode; and, over the falls walking to a goal, the median
+    distance of that goal when it was drawn (m) and the median share of it closed before the fall
+    (None where there are no such falls)."""
     fell = np.asarray(fell, bool)
-    walking = {r["episode"] for r in records if r["fell"] and r["closest"] >= success_radius}
+    walks = [r for r in records if r["fell"] and r["closest"] >= success_radius]
     seconds = np.asarray(alive)[:, fell].sum(0) * dt
-    return {"walking_to_a_goal": len(walking), "on_a_goal": int(fell.sum()) - len(walking),
-            "seconds_median": float(np.median(seconds)) if fell.any() else None}
+    distance = np.array([r["distance"] for r in walks])
+    closed = (distance - np.array([r["closest"] for r in walks])) / np.maximum(distance, 1e-9)
+    median = lambda x: float(np.median(x)) if len(x) else None  # noqa: E731
+    return {"walking_to_a_goal": len(walks), "on_a_goal": int(fell.sum()) - len(walks),
+            "seconds_median": median(seconds), "goal_distance_median": median(distance),
+            "share_closed_median": median(closed)}
 
 
 def sector_of(bearing_deg) -> np.ndarray:
@@ -189,6 +195,9 @@ def table_rows(summary: dict) -> list[tuple[str, str]]:
             rows.append(("falls: walking to a goal, on a goal (median time)",
                          f"{falls['walking_to_a_goal']}, {falls['on_a_goal']} "
                          f"({num(falls['seconds_median'], '.1f')} s)"))
+            if "goal_distance_median" in falls:
+                rows.append(("  walking: their goal's distance, share of it walked (medians)",
+                             f"{num(falls['goal_distance_median'], '.2f')} m, {pct(falls['share_closed_median'])}"))
     if "waypoints" in summary:
         path = summary["waypoints"]
         rows += [("waypoints", " ".join(f"{x:g},{y:g}" for x, y in path["waypoints"])),
