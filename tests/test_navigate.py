@@ -212,15 +212,18 @@ def test_falls_walking_to_a_goal_are_told_from_falls_on_a_goal_that_stays():
     records = nav_metrics.goals_of_episodes(start, qpos, goal, completed, alive, fell, dt=0.1)
     assert [r["closest"] for r in records[:2]] == [pytest.approx(1.4), pytest.approx(0.2)]
     falls = nav_metrics.fall_phases(records, fell, alive, success_radius=0.5, dt=0.1)
-    # Episode 0's goal was 2 m off and it closed 0.6 m of it: 30%.
+    # Episode 0's goal was 2 m off; it closed 0.6 m of it (30%) and fell on its 60th step, 6.0 s
+    # after the draw at the start (as a reached goal's `seconds` counts steps from the draw).
     assert falls == {"walking_to_a_goal": 1, "on_a_goal": 1, "seconds_median": pytest.approx(12.0),
-                     "goal_distance_median": pytest.approx(2.0), "share_closed_median": pytest.approx(0.3)}
+                     "goal_distance_median": pytest.approx(2.0), "share_closed_median": pytest.approx(0.3),
+                     "seconds_after_draw_median": pytest.approx(6.0)}
     none = nav_metrics.fall_phases(records[2:], fell[2:], alive[:, 2:], 0.5, 0.1)
     assert none["seconds_median"] is None and none["goal_distance_median"] is None
     rows = dict(nav_metrics.table_rows({"navigation": {**nav_metrics.navigation_summary(records, 3, 0.5, 0.2, 0.5, 3.0),
                                                        "falls": falls}}))
     assert rows["falls: walking to a goal, on a goal (median time)"] == "1, 1 (12.0 s)"
-    assert rows["  walking: their goal's distance, share of it walked (medians)"] == "2.00 m, 30.0%"
+    assert rows["  walking: their goal's distance, share of it walked, time since it was drawn (medians)"] == \
+        "2.00 m, 30.0%, 6.0 s"
 
 
 def test_path_deviation_and_arrivals():

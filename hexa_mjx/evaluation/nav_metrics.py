@@ -33,7 +33,8 @@ def goals_of_episodes(start_qpos, qpos, goal, completed, alive, fell, dt: float)
     completed (T, N): 1 on the step a goal was completed; alive (T, N): 1 inside the episode.
     A goal is drawn at the start or on the step its predecessor is completed; it counts as given
     if the episode has at least one step left for it. `closest`: the torso's least distance to it
-    (m), which tells a goal that stays, never completed, from one never reached.
+    (m), which tells a goal that stays, never completed, from one never reached; `fell_after_s`,
+    on the goal an episode fell walking to or standing on: the time from its draw to the fall.
     """
     steps, episodes = alive.shape
     records = []
@@ -55,6 +56,8 @@ def goals_of_episodes(start_qpos, qpos, goal, completed, alive, fell, dt: float)
             record = {"episode": i, "index": k, "bearing_deg": float(bearing),
                       "distance": float(np.linalg.norm(offset)), "closest": float(closest), "reached": reached,
                       "fell": bool(fell[i]) and not reached}
+            if record["fell"]:
+                record["fell_after_s"] = (length - 1 - drawn) * dt
             if reached:
                 arrive = events[k]
                 pos = qpos[arrive, i]
@@ -68,9 +71,9 @@ def goals_of_episodes(start_qpos, qpos, goal, completed, alive, fell, dt: float)
 def fall_phases(records: list[dict], fell, alive, success_radius: float, dt: float) -> dict:
     """Where the episodes that fell did so: walking to a goal (the goal in force never within
     `success_radius`, m) or on a goal (standing on one that stays, or on an arrival's last step);
-    the median time of a fall, s into the episode; and, over the falls walking to a goal, the median
-    distance of that goal when it was drawn (m) and the median share of it closed before the fall
-    (None where there are no such falls)."""
+    the median time of a fall, s into the episode; and, over the falls walking to a goal, the
+    medians of that goal's distance when it was drawn (m), of the share of it closed before the fall
+    and of the time from its draw to the fall, s (None where there are no such falls)."""
     fell = np.asarray(fell, bool)
     walks = [r for r in records if r["fell"] and r["closest"] >= success_radius]
     seconds = np.asarray(alive)[:, fell].sum(0) * dt
@@ -79,7 +82,8 @@ def fall_phases(records: list[dict], fell, alive, success_radius: float, dt: flo
     median = lambda x: float(np.median(x)) if len(x) else None  # noqa: E731
     return {"walking_to_a_goal": len(walks), "on_a_goal": int(fell.sum()) - len(walks),
             "seconds_median": median(seconds), "goal_distance_median": median(distance),
-            "share_closed_median": median(closed)}
+            "share_closed_median": median(closed),
+            "seconds_after_draw_median": median([r["fell_after_s"] for r in walks])}
 
 
 def sector_of(bearing_deg) -> np.ndarray:
@@ -196,8 +200,9 @@ def table_rows(summary: dict) -> list[tuple[str, str]]:
                          f"{falls['walking_to_a_goal']}, {falls['on_a_goal']} "
                          f"({num(falls['seconds_median'], '.1f')} s)"))
             if "goal_distance_median" in falls:
-                rows.append(("  walking: their goal's distance, share of it walked (medians)",
-                             f"{num(falls['goal_distance_median'], '.2f')} m, {pct(falls['share_closed_median'])}"))
+                rows.append(("  walking: their goal's distance, share of it walked, time since it was drawn "
+                             "(medians)", f"{num(falls['goal_distance_median'], '.2f')} m, "
+                             f"{pct(falls['share_closed_median'])}, {num(falls['seconds_after_draw_median'], '.1f')} s"))
     if "waypoints" in summary:
         path = summary["waypoints"]
         rows += [("waypoints", " ".join(f"{x:g},{y:g}" for x, y in path["waypoints"])),
