@@ -27,7 +27,8 @@ from hexa_mjx.tasks.base import Task
 
 # The terrain curriculum (level_moves): the share of the commanded planar path an episode walks
 # to go up a level, and below which it goes down one (legged_gym's: half the commanded distance).
-# The shipped velocity policy walks 0.79 to 0.91 of it on flat ground (docs/RESULTS.md).
+# The shipped velocity policy walks 0.93 to 0.99 of it on flat ground, by command class
+# (docs/RESULTS.md, "The shipped velocity policy: the recipe's seed 2").
 LEVEL_UP = 0.5
 LEVEL_DOWN = 0.25
 TRACKING_SIGMA = EnvConfig.tracking_sigma  # (m/s)^2 and (rad/s)^2: the default width, legged_gym's and Playground's
