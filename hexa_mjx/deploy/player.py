@@ -93,12 +93,15 @@ def model_matches(policy: OnnxPolicy, env: NativeEnv) -> bool:
     return hashlib.sha256(Path(env.config.model_path).read_bytes()).hexdigest() == policy.metadata["model"]["sha256"]
 
 
-def run_episode(policy: OnnxPolicy, env: NativeEnv, seed: int, record: bool = False, source=None) -> dict:
+def run_episode(policy: OnnxPolicy, env: NativeEnv, seed: int, record: bool = False, source=None,
+                end_at_path: bool = False) -> dict:
     """One deterministic episode from the start drawn by `seed`; `record` keeps qpos and goal per
     step. `source(t, env) -> (vx, vy, yaw rate)` (hexa_mjx.deploy.commands) drives a velocity
     policy instead of the task's own random commands; a source with a `goal` (the path follower)
-    also moves the goal marker, and one that is `finished` ends the episode. Velocity policies
-    record their commands and velocities."""
+    also moves the goal marker, and one that is `finished` ends the episode. A navigation policy
+    given `waypoints` reports the path as the follower does, and `end_at_path` ends its episode at
+    the last waypoint. Velocity policies record their commands and velocities."""
+    waypoints = len(env.config.waypoints) if env.task.follows_waypoints and source is None else 0
     obs = env.reset(seed=seed)
     if hasattr(source, "reset"):
         source.reset(env.data.qpos[:2])
@@ -133,6 +136,8 @@ def run_episode(policy: OnnxPolicy, env: NativeEnv, seed: int, record: bool = Fa
             goals.append(env.goal)
         if terminated or truncated or getattr(source, "finished", False):
             break
+        if end_at_path and waypoints and info["goals_reached"] >= waypoints:
+            break
     result = {"seed": seed, "success": bool(info["success"]), "final_distance": info["distance"],
               "fell": info["fell"], "nonfinite": info["nonfinite"], "goals_reached": info["goals_reached"],
               "steps": steps, "return": total, "feet_only_share": feet_only / steps,
@@ -141,6 +146,10 @@ def run_episode(policy: OnnxPolicy, env: NativeEnv, seed: int, record: bool = Fa
     if hasattr(source, "reached"):
         result["waypoints_reached"] = source.reached
         result["path_completed"] = source.completed
+        result["path_time_s"] = steps * env.dt if result["path_completed"] else None
+    elif waypoints:
+        result["waypoints_reached"] = min(int(info["goals_reached"]), waypoints)
+        result["path_completed"] = result["waypoints_reached"] == waypoints
         result["path_time_s"] = steps * env.dt if result["path_completed"] else None
     if commanding:
         from hexa_mjx.evaluation.tracking import episode_errors
@@ -194,7 +203,7 @@ def summarize(episodes: list[dict]) -> dict:
     speeds = [e["first_goal_distance"] / e["first_arrival_s"] for e in episodes if e["first_arrival_s"]]
     tracked = [e["velocity_rms"] for e in episodes if e.get("velocity_rms") is not None]
     path = {}
-    if all("path_completed" in e for e in episodes):  # walked a path through the follower
+    if all("path_completed" in e for e in episodes):  # walked a path: the follower's, or waypoints
         times = [e["path_time_s"] for e in episodes if e["path_completed"]]
         path = {"path_completed_rate": mean("path_completed"),
                 "path_time_s_median": float(np.median(times)) if times else None}

@@ -1,12 +1,12 @@
 """Every target of one policy for all of it, on native MuJoCo: a velocity policy walks the 2 m
-square through the path follower on flat ground, on rough ground, under pushes, at the corners of
-the physics grid and with failed legs.
+square through the path follower (a navigation policy, given its corners as waypoints) on flat
+ground, on rough ground, under pushes, at the corners of the physics grid and with failed legs.
 
     python -m hexa_mjx.studies.generalist POLICY.onnx --episodes 32 --workers 2 --json out.json
 
 Each condition runs the same seeded starts (random heading, the policy's joint noise) with
 everything else nominal (no pushes, latency, noise or failures but the condition's own). An
-episode succeeds when the follower's last waypoint counts (within the success radius, in order)
+episode succeeds when the path's last waypoint counts (within the success radius, in order)
 before the episode's time runs out (`--episode_length`, control steps); it ends there. Speed is
 the path's length over the median time of the completed episodes, and its share of the flat,
 intact robot's. Terrains are drawn at `--terrain_seed`, by default one the training never saw.

@@ -80,26 +80,41 @@ def settings(point: dict[str, float]) -> tuple[dict, randomization.Ranges | None
     return overrides, ranges
 
 
+def path_env(policy: player.OnnxPolicy, path, **overrides):
+    """The native environment that walks `path` ((x, y) waypoints, m, from the start): a velocity
+    policy through the path follower, a navigation policy given the waypoints; None: no path."""
+    env = player.env_for(policy, **overrides)
+    if path is None or env.task.uses_command:
+        return env
+    if not env.task.follows_waypoints:
+        raise ValueError(f"{policy.path} is a {policy.metadata['task']} policy: a path is walked by a velocity "
+                         "policy (through the path follower) or a navigation policy (its waypoints)")
+    return player.env_for(policy, **overrides, waypoints=path)
+
+
 def _episodes(policy_path: str, overrides: dict, ranges, seeds: list[int], path=None) -> list[dict]:
     policy = player.OnnxPolicy(policy_path)
-    env = player.env_for(policy, **overrides)
+    env = path_env(policy, path, **overrides)
     if ranges is not None:
         env.ranges = ranges
 
     def follower():  # a fresh one per episode: the path from the start, ended at its last waypoint
+        if path is None or not env.task.uses_command:
+            return None
         return commands.PathFollower(env.robot.start_xy + np.asarray(path), env.task.command_ranges,
                                      success_radius=env.config.success_radius, ends_episode=True)
-    return [player.run_episode(policy, env, s, source=None if path is None else follower()) for s in seeds]
+    return [player.run_episode(policy, env, s, source=follower(), end_at_path=True) for s in seeds]
 
 
 def run_conditions(policy_path: str, conditions: list[tuple[dict, object]], episodes: int, seed: int = 0,
                    workers: int = 1, path=None) -> list[dict]:
     """A summary (hexa_mjx.deploy.player.summarize) per condition (EnvConfig overrides, fixed physics
     ranges or None), each over the same seeded episodes, run in `workers` processes. With a `path`
-    ((x, y) waypoints, m, from the start), a velocity policy walks it through the path follower."""
+    ((x, y) waypoints, m, from the start), a velocity policy walks it through the path follower and
+    a navigation policy given its waypoints (path_env), each episode ended at the last waypoint."""
     policy = player.OnnxPolicy(policy_path)
     for overrides, _ in conditions:
-        player.env_for(policy, **overrides)  # bad input fails here, before any episode runs
+        path_env(policy, path, **overrides)  # bad input fails here, before any episode runs
     chunk = max(1, -(-episodes // max(workers, 1)))
     jobs = [(i, overrides, ranges, list(range(seed + start, seed + min(episodes, start + chunk))))
             for i, (overrides, ranges) in enumerate(conditions) for start in range(0, episodes, chunk)]
