@@ -371,3 +371,18 @@ def test_the_battery_gives_a_navigation_policy_the_square_as_waypoints():
     assert row["gait"]["speed"] > 0.5 * 8 / row["path_time_s_median"]
     with pytest.raises(ValueError, match="velocity policy .* or a navigation policy"):
         robustness.run_conditions(str(policies / "goal.onnx"), [(base, None)], 1, path=generalist.SQUARE)
+
+
+def test_the_path_study_walks_the_square_with_the_follower_and_with_waypoints():
+    from hexa_mjx.robot.constants import REPO_ROOT
+    from hexa_mjx.studies import path_following
+
+    policies = REPO_ROOT / "policies"
+    square = {"square": path_following.PATHS["square"]}
+    result = path_following.compare(str(policies / "velocity.onnx"), str(policies / "navigate.onnx"), square,
+                                    episodes=1, episode_length=1500)["square"]
+    follower, navigation = result["velocity + follower"], result["navigation"]
+    # 8 m: the follower at its 0.5 m/s takes about 16 s, the navigation policy at its own pace less
+    assert follower["completed_rate"] == 1.0 and 12 < follower["time_s_median"] < 25, follower
+    assert navigation["completed_rate"] == 1.0 and navigation["time_s_median"] < follower["time_s_median"], navigation
+    assert "| square | navigation | 100% |" in path_following.table({"square": result})

@@ -21,6 +21,7 @@ import numpy as np
 
 from hexa_mjx.deploy import commands, player
 from hexa_mjx.evaluation import nav_metrics
+from hexa_mjx.studies.robustness import path_env
 
 PATHS = {"square": [(2.0, 0.0), (2.0, 2.0), (0.0, 2.0), (0.0, 0.0)],
          "zigzag": [(1.0, 0.5), (2.0, -0.5), (3.0, 0.5), (4.0, -0.5)]}
@@ -54,8 +55,8 @@ def compare(velocity_path: str, navigate_path: str, paths: dict, episodes: int, 
         out[name] = {}
         for label, path in (("velocity + follower", velocity_path), ("navigation", navigate_path)):
             policy = player.OnnxPolicy(path)
-            follow = policy.metadata["task"] == "velocity"
-            env = player.env_for(policy, episode_length=episode_length, **({} if follow else {"waypoints": points}))
+            env = path_env(policy, points, episode_length=episode_length)
+            follow = env.task.uses_command
             runs = []
             for i in range(episodes):
                 source = None
