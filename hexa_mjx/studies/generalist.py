@@ -63,8 +63,6 @@ def battery(policy_path: str, episodes: int, seed: int = 0, workers: int = 1, te
     `terrain_contacts`: the native engine's heightfield contacts (hexa_mjx.engines.terrain_contacts);
     `groups`: only these of TARGETS' groups (the flat row always runs: the speed shares need it)."""
     policy = player.OnnxPolicy(policy_path)
-    if policy.metadata["env_config"].get("task") != "velocity":
-        raise ValueError(f"{policy_path} is not a velocity-task policy: the battery drives it with the path follower")
     rows = [r for r in conditions(policy, terrain_seed) if not groups or r[0] in groups or r[0] == "flat"]
     base = base_settings(episode_length, terrain_contacts)
     summaries = run_conditions(policy_path, [({**base, **o}, r)
