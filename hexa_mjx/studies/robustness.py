@@ -82,7 +82,8 @@ def settings(point: dict[str, float]) -> tuple[dict, randomization.Ranges | None
 
 def path_env(policy: player.OnnxPolicy, path, **overrides):
     """The native environment that walks `path` ((x, y) waypoints, m, from the start): a velocity
-    policy through the path follower, a navigation policy given the waypoints; None: no path."""
+    policy through the path follower, a navigation policy given the waypoints; without a path, the
+    policy's own environment."""
     env = player.env_for(policy, **overrides)
     if path is None or env.task.uses_command:
         return env
