@@ -359,6 +359,7 @@ def test_the_generalist_battery_walks_the_square_and_stops_at_its_end():
 
 
 def test_the_battery_gives_a_navigation_policy_the_square_as_waypoints():
+    from hexa_mjx.deploy import player
     from hexa_mjx.robot.constants import REPO_ROOT
     from hexa_mjx.studies import generalist, robustness
 
@@ -369,6 +370,12 @@ def test_the_battery_gives_a_navigation_policy_the_square_as_waypoints():
     # follower's table: 8.1 s); its episode ends at the last waypoint, not at 30 s
     assert row["path_completed_rate"] == 1.0 and 4 < row["path_time_s_median"] < 20, row
     assert row["gait"]["speed"] > 0.5 * 8 / row["path_time_s_median"]
+    # without end_at_path (play.py) the episode goes on, and the path's time is still its last waypoint's
+    policy = player.OnnxPolicy(policies / "navigate.onnx")
+    env = robustness.path_env(policy, generalist.SQUARE, **base)
+    episode = player.run_episode(policy, env, 0)
+    assert episode["path_completed"] and episode["path_time_s"] == pytest.approx(row["path_time_s_median"])
+    assert episode["steps"] * env.dt > 1.5 * episode["path_time_s"]  # it stood on well past the path's end
     with pytest.raises(ValueError, match="velocity policy .* or a navigation policy"):
         robustness.run_conditions(str(policies / "goal.onnx"), [(base, None)], 1, path=generalist.SQUARE)
 

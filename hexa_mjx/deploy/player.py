@@ -109,7 +109,7 @@ def run_episode(policy: OnnxPolicy, env: NativeEnv, seed: int, record: bool = Fa
     qpos, goals = [env.data.qpos.copy()], [env.goal]
     commanding = env.task.uses_command
     track = {"command": [], "commanded": [], "velocity": []}
-    total, feet_only, steps, first_arrival = 0.0, 0, 0, None
+    total, feet_only, steps, first_arrival, path_done = 0.0, 0, 0, None, None
     stance, power, xy = [], [], []  # per step, for the gait (hexa_mjx.evaluation.gait)
     while True:
         if source is not None:
@@ -134,9 +134,10 @@ def run_episode(policy: OnnxPolicy, env: NativeEnv, seed: int, record: bool = Fa
         if record or commanding:
             qpos.append(env.data.qpos.copy())
             goals.append(env.goal)
-        if terminated or truncated or getattr(source, "finished", False):
-            break
-        if end_at_path and waypoints and info["goals_reached"] >= waypoints:
+        if path_done is None and (source.completed if hasattr(source, "completed")
+                                  else waypoints and info["goals_reached"] >= waypoints):
+            path_done = steps  # the path's time: when its last waypoint counted, not the episode's end
+        if terminated or truncated or getattr(source, "finished", False) or (end_at_path and path_done):
             break
     result = {"seed": seed, "success": bool(info["success"]), "final_distance": info["distance"],
               "fell": info["fell"], "nonfinite": info["nonfinite"], "goals_reached": info["goals_reached"],
@@ -145,12 +146,11 @@ def run_episode(policy: OnnxPolicy, env: NativeEnv, seed: int, record: bool = Fa
               "gait": episode_gait(env, np.array(stance), np.array(power), np.array(xy))}
     if hasattr(source, "reached"):
         result["waypoints_reached"] = source.reached
-        result["path_completed"] = source.completed
-        result["path_time_s"] = steps * env.dt if result["path_completed"] else None
     elif waypoints:
         result["waypoints_reached"] = min(int(info["goals_reached"]), waypoints)
-        result["path_completed"] = result["waypoints_reached"] == waypoints
-        result["path_time_s"] = steps * env.dt if result["path_completed"] else None
+    if hasattr(source, "reached") or waypoints:
+        result["path_completed"] = path_done is not None
+        result["path_time_s"] = None if path_done is None else path_done * env.dt
     if commanding:
         from hexa_mjx.evaluation.tracking import episode_errors
 
