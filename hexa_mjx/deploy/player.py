@@ -147,7 +147,7 @@ def run_episode(policy: OnnxPolicy, env: NativeEnv, seed: int, record: bool = Fa
     if hasattr(source, "reached"):
         result["waypoints_reached"] = source.reached
     elif waypoints:
-        result["waypoints_reached"] = min(int(info["goals_reached"]), waypoints)
+        result["waypoints_reached"] = int(info["goals_reached"])  # capped at the path's length (mdp.episode)
     if hasattr(source, "reached") or waypoints:
         result["path_completed"] = path_done is not None
         result["path_time_s"] = None if path_done is None else path_done * env.dt

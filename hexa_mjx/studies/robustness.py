@@ -27,6 +27,7 @@ import numpy as np
 
 from hexa_mjx.deploy import commands, player
 from hexa_mjx.mdp import randomization, terrain
+from hexa_mjx.tasks import TASKS
 
 NOMINAL = randomization.Ranges(friction=(1.0, 1.0), mass_scale=(1.0, 1.0), payload=(0.0, 0.0), kp_scale=(1.0, 1.0),
                                force_scale=(1.0, 1.0), damping_scale=(1.0, 1.0), armature_scale=(1.0, 1.0))
@@ -84,13 +85,13 @@ def path_env(policy: player.OnnxPolicy, path, **overrides):
     """The native environment that walks `path` ((x, y) waypoints, m, from the start): a velocity
     policy through the path follower, a navigation policy given the waypoints; without a path, the
     policy's own environment."""
-    env = player.env_for(policy, **overrides)
-    if path is None or env.task.uses_command:
-        return env
-    if not env.task.follows_waypoints:
-        raise ValueError(f"{policy.path} is a {policy.metadata['task']} policy: a path is walked by a velocity "
-                         "policy (through the path follower) or a navigation policy (its waypoints)")
-    return player.env_for(policy, **overrides, waypoints=path)
+    task = TASKS.get(policy.metadata["env_config"].get("task"))  # None: env_for says what is wrong
+    if path is not None and task is not None and not task.uses_command:
+        if not task.follows_waypoints:
+            raise ValueError(f"{policy.path} is a {policy.metadata['task']} policy: a path is walked by a velocity "
+                             "policy (through the path follower) or a navigation policy (its waypoints)")
+        overrides = {**overrides, "waypoints": path}
+    return player.env_for(policy, **overrides)
 
 
 def _episodes(policy_path: str, overrides: dict, ranges, seeds: list[int], path=None) -> list[dict]:
