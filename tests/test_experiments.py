@@ -213,7 +213,7 @@ def test_seed_summary_marks_the_figures_that_miss_the_tasks_targets(tmp_path, ca
     other.write_text(json.dumps({"task": "goal", "summary": {"success_rate": 1.0, "fall_rate": 0.0}}))
     with pytest.raises(SystemExit):  # two tasks, and the report's task has no targets here
         seed_summary.main(["--targets", str(files[0]), str(other)])
-    assert "--targets needs evaluations of one task with targets (navigate, velocity)" in capsys.readouterr().err
+    assert "--targets needs evaluations of one task with targets (drive, navigate, velocity)" in capsys.readouterr().err
 
 
 def seed_files(tmp_path, pattern: str, per_seed: list) -> list:

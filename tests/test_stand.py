@@ -52,8 +52,8 @@ def test_rewards_are_logged_per_term_and_pay_for_facing_the_heading(stand_env, s
     facing = stand.heading_tracking(None, qpos, None, None, yaw(qpos[3:7]), None)
     away = stand.heading_tracking(None, qpos, None, None, yaw(qpos[3:7]) + np.pi, None)
     assert float(facing) == pytest.approx(1.0) and float(away) < 1e-6
-    reached = stand_env.task.reached(jp.float32(0.0), qpos, yaw(qpos[3:7]) + 2 * stand.HEADING_TOLERANCE)
-    assert not bool(reached) and bool(stand_env.task.reached(jp.float32(0.0), qpos, yaw(qpos[3:7])))
+    reached = stand_env.task.reached(jp.float32(0.0), qpos, yaw(qpos[3:7]) + 2 * stand.HEADING_TOLERANCE, None)
+    assert not bool(reached) and bool(stand_env.task.reached(jp.float32(0.0), qpos, yaw(qpos[3:7]), None))
 
 
 def test_native_engine_observes_what_mjx_does(stand_env, stand_states):

@@ -93,6 +93,8 @@ class EnvConfig:
                                         "Isaac Lab sets each term's own; 0: the same as --tracking_sigma")
     command_heading_share: float = setting(0.0, "velocity: share of the commands that give a heading to turn to "
                                                 "instead of a yaw rate (legged_gym's heading mode)")
+    goal_mode_share: float = setting(0.5, "drive: share of the episodes in goal mode (the navigate task's goals); "
+                                          "the rest follow velocity commands. A waypoint path is walked in goal mode")
     # Leg failure: a failed leg's three servos stop working. The policy is not told which leg failed.
     disabled_legs: tuple = setting((), "legs whose servos fail in every episode, e.g. \"3\" or \"1 4\" "
                                        "(numbers from 1)")
@@ -209,7 +211,7 @@ def check_config(config: EnvConfig) -> None:
     if not (math.isfinite(config.yaw_tracking_sigma) and config.yaw_tracking_sigma >= 0):
         raise ValueError(f"yaw_tracking_sigma is a width above 0 (or 0 for tracking_sigma's), got "
                          f"{config.yaw_tracking_sigma}")
-    for name in ("command_zero_share", "command_heading_share"):
+    for name in ("command_zero_share", "command_heading_share", "goal_mode_share"):
         if not 0 <= getattr(config, name) <= 1:
             raise ValueError(f"{name} is a share from 0 to 1, got {getattr(config, name)}")
     for point in config.waypoints:

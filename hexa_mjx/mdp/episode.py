@@ -166,7 +166,7 @@ class Episode:
         # Every term sees the goal of this step; a goal reached now is replaced only afterwards, so
         # the step that draws a new goal pays no spurious approach reward or penalty.
         dist = xp.linalg.norm(goal - qpos[:2])
-        reached = self.task.reached(dist, qpos, heading)
+        reached = self.task.reached(dist, qpos, heading, command)
         completed = self.task.goal_completed(reached, info["goals"])
         if "stay_after" in info:  # this episode's goal stays put once that many were completed
             completed = completed & (info["goals"] < info["stay_after"])
@@ -181,7 +181,7 @@ class Episode:
                               goal, bad, non_foot, done, completed, power, ground=self.robot.ground(qpos[:2]),
                               air_time=air_time, working=1.0 - info["failed_legs"], stance_avg=stance_avg, **gait)
         terms.update(self.task.reward_terms(self.active, prev_qpos, qpos, qvel, goal, heading, command))
-        terms = {name: terms[name] for name in self.active}  # the scales' order: the reward sums in it
+        terms = self.task.mask_terms({name: terms[name] for name in self.active}, command)  # the scales' order: the reward sums in it
 
         t = info["t"] + 1
         over = done | (t >= cfg.episode_length)
@@ -191,7 +191,7 @@ class Episode:
             asked, walked = self.task.walking(qpos, qvel, command, heading)
             walking = {"asked_m": info["asked_m"] + asked * self.dt, "walked_m": info["walked_m"] + walked * self.dt}
         if cfg.curriculum_levels:
-            up, down = self.task.level_moves(completed, over, done, goals, walking)
+            up, down = self.task.level_moves(completed, over, done, goals, walking, command)
             level = curriculum.next_level(level, cfg.curriculum_levels, up, down)
         # A new goal is drawn only on the step that completes one (native MuJoCo draws nothing else).
         next_goal = draws.select(completed, lambda: self.task.next_goal(qpos, goal, goals, draws, key, level),

@@ -1,6 +1,7 @@
 """Every target of one policy for all of it, on native MuJoCo: a velocity policy walks the 2 m
-square through the path follower (a navigation policy, given its corners as waypoints) on flat
-ground, on rough ground, under pushes, at the corners of the physics grid and with failed legs.
+square through the path follower (a navigation policy, given its corners as waypoints; a drive
+policy either way, `--goal_mode`) on flat ground, on rough ground, under pushes, at the corners of
+the physics grid and with failed legs.
 
     python -m hexa_mjx.studies.generalist POLICY.onnx --episodes 32 --workers 2 --json out.json
 
@@ -26,6 +27,7 @@ from hexa_mjx.deploy import player
 from hexa_mjx.engines.terrain_contacts import MODES as CONTACT_MODES
 from hexa_mjx.studies.path_following import PATHS
 from hexa_mjx.studies.robustness import CLEAN, run_conditions, settings
+from hexa_mjx.tasks import TASKS
 
 SQUARE = PATHS["square"]  # m from the start, world frame
 PATH_LENGTH = float(np.linalg.norm(np.diff([(0.0, 0.0), *SQUARE], axis=0), axis=1).sum())  # m: 8
@@ -58,13 +60,18 @@ def conditions(policy: player.OnnxPolicy, terrain_seed: int) -> list[tuple[str, 
 
 
 def battery(policy_path: str, episodes: int, seed: int = 0, workers: int = 1, terrain_seed: int = 1,
-            episode_length: int = EPISODE_LENGTH, terrain_contacts: str = "all", groups=None) -> list[dict]:
+            episode_length: int = EPISODE_LENGTH, terrain_contacts: str = "all", groups=None,
+            goal_mode: bool = False) -> list[dict]:
     """One row per condition: its group, name, path figures (player.summarize) and speed share.
     `terrain_contacts`: the native engine's heightfield contacts (hexa_mjx.engines.terrain_contacts);
-    `groups`: only these of TARGETS' groups (the flat row always runs: the speed shares need it)."""
+    `groups`: only these of TARGETS' groups (the flat row always runs: the speed shares need it);
+    `goal_mode`: a drive policy walks the square in its goal mode, given the corners as waypoints."""
     policy = player.OnnxPolicy(policy_path)
+    task = TASKS.get(policy.metadata["task"])
+    if goal_mode and not (task is not None and task.uses_command and task.follows_waypoints):
+        raise ValueError(f"goal mode is a drive policy's; {policy_path} is a {policy.metadata['task']} policy")
     rows = [r for r in conditions(policy, terrain_seed) if not groups or r[0] in groups or r[0] == "flat"]
-    base = base_settings(episode_length, terrain_contacts)
+    base = {**base_settings(episode_length, terrain_contacts), **({"goal_mode_share": 1.0} if goal_mode else {})}
     summaries = run_conditions(policy_path, [({**base, **o}, r)
                                              for _, _, o, r in rows], episodes, seed, workers, path=SQUARE)
     out = [{"group": group, "condition": name, **summary} for (group, name, _, _), summary in zip(rows, summaries)]
@@ -121,7 +128,7 @@ def gait_table(rows: list[dict]) -> str:
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m hexa_mjx.studies.generalist", description=__doc__.split("\n\n")[0])
-    p.add_argument("policy", help="exported velocity-task policy (.onnx)")
+    p.add_argument("policy", help="exported velocity-, drive- or navigate-task policy (.onnx)")
     p.add_argument("--episodes", type=int, default=32, help="per condition")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--terrain_seed", type=int, default=1, help="the rough conditions' terrain")
@@ -131,13 +138,16 @@ def main(argv=None) -> int:
                    help="the rough conditions' heightfield contacts: MuJoCo C's own, or made as MJX makes them "
                         "(hexa_mjx.engines.terrain_contacts)")
     p.add_argument("--groups", nargs="+", default=None, choices=list(TARGETS), help="only these groups (and flat)")
+    p.add_argument("--goal_mode", action="store_true",
+                   help="a drive policy walks the square in its goal mode, given the corners as waypoints "
+                        "(default: its command mode, through the path follower)")
     p.add_argument("--json", default="", help="write the rows here")
     args = p.parse_args(argv)
     if args.episodes < 1 or args.workers < 1 or args.episode_length < 1:
         p.error("--episodes, --workers and --episode_length must be at least 1")
     try:
         rows = battery(args.policy, args.episodes, args.seed, args.workers, args.terrain_seed, args.episode_length,
-                       args.terrain_contacts, args.groups)
+                       args.terrain_contacts, args.groups, args.goal_mode)
     except (FileNotFoundError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

@@ -83,14 +83,19 @@ def settings(point: dict[str, float]) -> tuple[dict, randomization.Ranges | None
 
 def path_env(policy: player.OnnxPolicy, path, **overrides):
     """The native environment that walks `path` ((x, y) waypoints, m, from the start): a velocity
-    policy through the path follower, a navigation policy given the waypoints; without a path, the
-    policy's own environment."""
+    policy through the path follower, a navigation policy given the waypoints, a drive policy
+    through the follower or, with `goal_mode_share=1` among the overrides, given the waypoints in
+    its goal mode; without a path, the policy's own environment."""
     task = TASKS.get(policy.metadata["env_config"].get("task"))  # None: env_for says what is wrong
-    if path is not None and task is not None and not task.uses_command:
-        if not task.follows_waypoints:
-            raise ValueError(f"{policy.path} is a {policy.metadata['task']} policy: a path is walked by a velocity "
-                             "policy (through the path follower) or a navigation policy (its waypoints)")
+    by_goals = task is not None and task.follows_waypoints and (
+        not task.uses_command or overrides.get("goal_mode_share") == 1.0)
+    if path is not None and task is not None and not (task.uses_command or by_goals):
+        raise ValueError(f"{policy.path} is a {policy.metadata['task']} policy: a path is walked by a velocity "
+                         "policy (through the path follower) or a navigation policy (its waypoints)")
+    if path is not None and by_goals:
         overrides = {**overrides, "waypoints": path}
+    elif path is not None and task.follows_waypoints:  # a drive policy: in command mode from the first step
+        overrides = {**overrides, "goal_mode_share": 0.0}
     return player.env_for(policy, **overrides)
 
 
@@ -101,7 +106,7 @@ def _episodes(policy_path: str, overrides: dict, ranges, seeds: list[int], path=
         env.ranges = ranges
 
     def follower():  # a fresh one per episode: the path from the start, ended at its last waypoint
-        if path is None or not env.task.uses_command:
+        if path is None or env.config.waypoints:
             return None
         return commands.PathFollower(env.robot.start_xy + np.asarray(path), env.task.command_ranges,
                                      success_radius=env.config.success_radius, ends_episode=True)

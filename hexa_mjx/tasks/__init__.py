@@ -8,12 +8,13 @@ the smallest example) and add its class to TASKS below.
 from __future__ import annotations
 
 from hexa_mjx.tasks.base import Task
+from hexa_mjx.tasks.drive import DriveTask
 from hexa_mjx.tasks.goal import GoalTask
 from hexa_mjx.tasks.navigate import NavigateTask
 from hexa_mjx.tasks.stand import StandTask
 from hexa_mjx.tasks.velocity import VelocityTask
 
-TASKS: dict[str, type[Task]] = {cls.name: cls for cls in (GoalTask, NavigateTask, StandTask, VelocityTask)}
+TASKS: dict[str, type[Task]] = {cls.name: cls for cls in (GoalTask, NavigateTask, StandTask, VelocityTask, DriveTask)}
 DEFAULT_TASK = GoalTask.name  # the report's task
 
 

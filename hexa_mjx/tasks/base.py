@@ -63,7 +63,7 @@ class Task:
         """The heading (rad) the goal marker asks for, for tasks with `uses_heading`."""
         return None
 
-    def reached(self, dist, qpos, heading):
+    def reached(self, dist, qpos, heading, command):
         """Whether the torso is where the task asks (`dist`: m from the goal): within `success_radius`."""
         return dist < self.config.success_radius
 
@@ -72,10 +72,11 @@ class Task:
         and `goals` were completed earlier in the episode. Default: goals are never replaced."""
         return namespace(reached).zeros((), bool)
 
-    def level_moves(self, completed, over, fell, goals, walking):
+    def level_moves(self, completed, over, fell, goals, walking, command):
         """(up, down) of the curriculum's level after a step (hexa_mjx.mdp.curriculum): up for a goal
         completed, down for an episode that ended in a fall (`fell`) or without a goal. `walking`:
-        the episode's {"asked_m", "walked_m"} so far, for tasks with `uses_command` (`walking`)."""
+        the episode's {"asked_m", "walked_m"} so far, for tasks with `uses_command` (`walking`);
+        `command`: this step's command (the model's userdata)."""
         return completed, over & (fell | (goals == 0))
 
     def walking(self, qpos, qvel, command, heading):
@@ -94,6 +95,11 @@ class Task:
         """(command, heading) after control step `t` of the episode: a task with `uses_command`
         replaces them on its schedule (`level`: the environment's curriculum level)."""
         return command, heading
+
+    def mask_terms(self, terms: dict, command) -> dict:
+        """The reward terms that count this step under `command`: all of them, but for a task with
+        modes (the drive task zeroes the other mode's terms)."""
+        return terms
 
     def reward_terms(self, names, prev_qpos, qpos, qvel, goal, heading, command) -> dict:
         """Unscaled values of the task's own terms among `names`."""

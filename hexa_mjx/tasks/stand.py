@@ -60,7 +60,7 @@ class StandTask(Task):
     def goal_heading(self, qpos, draws, key):
         return draws.uniform(key, (), -np.pi, np.pi)
 
-    def reached(self, dist, qpos, heading):
+    def reached(self, dist, qpos, heading, command):
         return (dist < self.config.success_radius) & (abs(heading_error(qpos, heading)) < HEADING_TOLERANCE)
 
     def observe(self, qpos, qvel, ctrl, goal, heading, command):

@@ -94,7 +94,7 @@ class VelocityTask(Task):
             return None
         return curriculum.range_fraction(level, cfg.curriculum_levels)
 
-    def level_moves(self, completed, over, fell, goals, walking):
+    def level_moves(self, completed, over, fell, goals, walking, command):
         """legged_gym's rule on distances: up for an episode that ran its full length and walked at
         least LEVEL_UP of the commanded planar path, down for a fall or less than LEVEL_DOWN of it
         (standing still walks none). Lasting alone is no test: promoted for it, a policy learnt
@@ -122,7 +122,7 @@ class VelocityTask(Task):
     def first_goal(self, qpos, draws, key, level=0):
         return qpos[:2]  # no goal: the marker stays at the start (the path follower moves it)
 
-    def reached(self, dist, qpos, heading):
+    def reached(self, dist, qpos, heading, command):
         return namespace(dist).zeros((), bool)  # no goal to reach: eval.py reports tracking instead
 
     def first_command(self, qpos, draws, key):

@@ -14,7 +14,7 @@ import jax
 from hexa_mjx.mdp import rewards
 from hexa_mjx.robot import constants as robot
 from hexa_mjx.tasks import default_reward, task_class
-from hexa_mjx.training import distributed, symmetry
+from hexa_mjx.training import distributed, symmetry, warm_start
 from hexa_mjx.training.checkpoints import list_checkpoints, resolve_checkpoint
 from hexa_mjx.training.config import RESUMABLE, ConfigError, TrainConfig, default_run_dir, load_config, \
     make_env_for, saved_settings
@@ -154,10 +154,17 @@ def init_checkpoint(cfg: TrainConfig) -> Path:
     source = load_config(source_dir)
     differ = [f"{k} {getattr(source, k)!r} there, {getattr(cfg, k)!r} here" for k in PARAM_SHAPE
               if getattr(source, k) != getattr(cfg, k)]
-    if source.task != cfg.task:  # another task's policy fits if it observes as many values
+    if source.task != cfg.task:  # another task's policy fits if it observes as many values, or a prefix
         sizes = [observation_size(t, cfg.model) for t in (source.task, cfg.task)]
-        if sizes[0] != sizes[1]:
+        layouts = [task_class(t).layout(robot_joints(cfg.model)) for t in (source.task, cfg.task)]
+        if sizes[0] != sizes[1] and not warm_start.extends(*layouts):
             differ.append(f"task {source.task!r} there, observing {sizes[0]} values, {cfg.task!r} here, {sizes[1]}")
+        elif sizes[0] != sizes[1] and (cfg.privileged_critic or source.privileged_critic):
+            differ.append(f"a {cfg.task}-task run widens a {source.task}-task policy only without privileged_critic")
+        elif sizes[0] != sizes[1] and cfg.init_from not in NOTED:
+            NOTED.add(cfg.init_from)
+            print(f"note: --init_from {cfg.init_from} is a {source.task}-task policy; the {cfg.task} task observes "
+                  f"{sizes[1] - sizes[0]} values more, which its networks start with zero weights on")
         elif not differ and cfg.init_from not in NOTED:  # validated more than once per run: said once
             NOTED.add(cfg.init_from)
             print(f"note: --init_from {cfg.init_from} is a {source.task}-task policy; its first inputs mean other "
@@ -170,12 +177,16 @@ def init_checkpoint(cfg: TrainConfig) -> Path:
     return checkpoint
 
 
-def observation_size(task: str, model: str = "") -> int:
-    """Values the policy of `task` observes on the run's robot."""
+def robot_joints(model: str = "") -> int:
+    """Actuated joints of the run's robot (`model`: its MJCF, "" the report's hexapod)."""
     import mujoco
 
-    joints = mujoco.MjModel.from_xml_path(str(model or robot.MODEL_XML)).nu
-    return task_class(task).layout(joints)[-1][1]
+    return mujoco.MjModel.from_xml_path(str(model or robot.MODEL_XML)).nu
+
+
+def observation_size(task: str, model: str = "") -> int:
+    """Values the policy of `task` observes on the run's robot."""
+    return task_class(task).layout(robot_joints(model))[-1][1]
 
 
 def check_run_dir(cfg: TrainConfig, run_dir: Path) -> None:

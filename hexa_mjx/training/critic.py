@@ -16,6 +16,7 @@ import jax
 import numpy as np
 
 from hexa_mjx.engines.wrappers import CRITIC_KEY, POLICY_KEY, CriticObservation
+from hexa_mjx.training.warm_start import padded_statistics, widen
 
 
 def observation_shapes(cfg, env):
@@ -44,18 +45,8 @@ def with_critic(params, template):
     with the source's value of every state."""
     normalizer, policy, value = jax.tree.map(np.asarray, params)
     like = template[0]
-    extra = like.mean[CRITIC_KEY].shape[0] - normalizer.mean.shape[0]
-    pad = lambda x, fill: np.concatenate([x, np.full(extra, fill, x.dtype)])  # noqa: E731
-    count = normalizer.count  # brax's UInt64 (hi, lo): observations seen
-    seen = float(count.hi) * 2.0 ** 32 + float(count.lo) if hasattr(count, "hi") else float(count)
-    stats = like.replace(
-        count=count, mean={POLICY_KEY: normalizer.mean, CRITIC_KEY: pad(normalizer.mean, 0.0)},
-        summed_variance={POLICY_KEY: normalizer.summed_variance, CRITIC_KEY: pad(normalizer.summed_variance, seen)},
-        std={POLICY_KEY: normalizer.std, CRITIC_KEY: pad(normalizer.std, 1.0)})
-
-    def widen(source, wanted):  # the first layer's kernel gains rows; every other array fits as it is
-        if source.shape == wanted.shape:
-            return source
-        return np.concatenate([source, np.zeros((wanted.shape[0] - source.shape[0],) + source.shape[1:], source.dtype)])
-
+    mean, summed_variance, std = padded_statistics(normalizer, like.mean[CRITIC_KEY].shape[0] - normalizer.mean.shape[0])
+    stats = like.replace(count=normalizer.count, mean={POLICY_KEY: normalizer.mean, CRITIC_KEY: mean},
+                         summed_variance={POLICY_KEY: normalizer.summed_variance, CRITIC_KEY: summed_variance},
+                         std={POLICY_KEY: normalizer.std, CRITIC_KEY: std})
     return stats, policy, jax.tree.map(widen, value, template[2])

@@ -14,6 +14,7 @@ import functools
 import json
 import math
 import time
+import types
 from pathlib import Path
 
 import jax
@@ -23,6 +24,7 @@ from hexa_mjx.training import distributed, crash_points as faults, ppo, resume a
 from hexa_mjx.mdp import randomization
 from hexa_mjx.training.checkpoints import (BEST, checkpoint_dir, list_checkpoints, load_checkpoint, load_latest,
                                            load_resume, remove_temporaries, resolve_checkpoint, save_checkpoint)
+from hexa_mjx.training.checks import observation_size
 from hexa_mjx.training.config import TrainConfig, init_checkpoint, load_config, make_env_for, validate
 from hexa_mjx.mdp.curriculum import level_summary
 from hexa_mjx.mdp.failure_schedule import schedule_summary
@@ -32,6 +34,7 @@ from hexa_mjx.training.run_lock import RunLock
 from hexa_mjx.evaluation.run_evaluator import RunEvaluator
 from hexa_mjx.engines.wrappers import POLICY_KEY, mean_last_return
 from hexa_mjx.training.critic import with_critic
+from hexa_mjx.training.warm_start import widened
 from hexa_mjx.training.networks import init_params, network_factory, policy_maker, templates
 from hexa_mjx import atomic
 
@@ -100,9 +103,16 @@ def program_description(cfg: TrainConfig, offset: int) -> dict:
 
 def load_start(cfg: TrainConfig, env, template) -> tuple[int, object]:
     """--init_from's (step, params) in the structure of `template`: a source trained without a
-    privileged critic gets one that starts as its own critic (`critic.with_critic`)."""
+    privileged critic gets one that starts as its own critic (`critic.with_critic`), one whose task
+    observes fewer values zero weights on the rest (`warm_start.widened`)."""
     path = init_checkpoint(cfg)
-    if not cfg.privileged_critic or load_config(resolve_checkpoint(path)[0]).privileged_critic:
+    source = load_config(resolve_checkpoint(path)[0])
+    observed = observation_size(source.task, cfg.model)
+    if observed < env.observation_size:  # a task whose observation this one extends (checked by init_checkpoint)
+        shorter = types.SimpleNamespace(observation_size=observed, action_size=env.action_size)
+        step, params = load_checkpoint(path, init_params(cfg, shorter))
+        return step, widened(params, template)
+    if not cfg.privileged_critic or source.privileged_critic:
         return load_checkpoint(path, template)
     step, params = load_checkpoint(path, init_params(dataclasses.replace(cfg, privileged_critic=False), env))
     return step, with_critic(params, template)
