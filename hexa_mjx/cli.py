@@ -19,7 +19,7 @@ ENV_FLAGS = ("episode_length", "goal_distance", "goal_min_distance", "goal_max_d
              "action_latency", "obs_noise", "disabled_legs", "leg_failure", "leg_failure_rate",
              "leg_failure_pairs", "failure_mode", "terrain", "terrain_seed",
              "terrain_difficulty", "command_vx", "command_vy", "command_yaw_rate", "command_interval",
-             "command_zero_share", "command_heading_share", "tracking_sigma", "yaw_tracking_sigma")
+             "command_zero_share", "command_heading_share", "tracking_sigma", "yaw_tracking_sigma", "goal_mode_share")
 TYPES = {"int": int, "float": float, "str": str, "tuple": str}
 
 

@@ -76,6 +76,7 @@ class TrainConfig:
     tracking_sigma: float = env_field("tracking_sigma")
     yaw_tracking_sigma: float = env_field("yaw_tracking_sigma")
     command_heading_share: float = env_field("command_heading_share")
+    goal_mode_share: float = env_field("goal_mode_share")
     leg_failure: str = env_field("leg_failure")
     leg_failure_rate: float = env_field("leg_failure_rate")
     leg_failure_weights: list = env_field("leg_failure_weights")
