@@ -94,7 +94,7 @@ def path_env(policy: player.OnnxPolicy, path, **overrides):
                          "policy (through the path follower) or a navigation policy (its waypoints)")
     if path is not None and by_goals:
         overrides = {**overrides, "waypoints": path}
-    elif path is not None and task.follows_waypoints:  # a drive policy: in command mode from the first step
+    elif path is not None and task is not None and task.follows_waypoints:  # drive: commands from the first step
         overrides = {**overrides, "goal_mode_share": 0.0}
     return player.env_for(policy, **overrides)
 

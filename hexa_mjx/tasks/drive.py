@@ -121,7 +121,8 @@ class DriveTask(VelocityTask):
 
     def command_fields(self) -> list[dict]:
         start = self.layout(len(self.robot.ctrl_lo))[-1][0]
-        return [{**field, "observation_index": start + field["observation_index"]} for field in super().command_fields()]
+        return [{**field, "observation_index": start + field["observation_index"]}
+                for field in super().command_fields()]
 
     def deployment_settings(self) -> dict:
         return self.navigation.deployment_settings()
@@ -152,7 +153,8 @@ class DriveTask(VelocityTask):
             part = evaluate(env, start_qpos[idx], {k: v[:, idx] for k, v in traj.items()}, alive[:, idx],
                             np.asarray(fell)[idx])
             summary.update(part[0])
-            per_episode.update({name: _reindexed(value, idx) for name, value in part[1].items()})
+            whole = len(idx) == len(goal_mode)  # every episode in this mode: their numbers are the evaluation's
+            per_episode.update({name: value if whole else _reindexed(value, idx) for name, value in part[1].items()})
         return summary, per_episode
 
     @classmethod

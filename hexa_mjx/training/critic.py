@@ -45,7 +45,8 @@ def with_critic(params, template):
     with the source's value of every state."""
     normalizer, policy, value = jax.tree.map(np.asarray, params)
     like = template[0]
-    mean, summed_variance, std = padded_statistics(normalizer, like.mean[CRITIC_KEY].shape[0] - normalizer.mean.shape[0])
+    extra = like.mean[CRITIC_KEY].shape[0] - normalizer.mean.shape[0]
+    mean, summed_variance, std = padded_statistics(normalizer, extra)
     stats = like.replace(count=normalizer.count, mean={POLICY_KEY: normalizer.mean, CRITIC_KEY: mean},
                          summed_variance={POLICY_KEY: normalizer.summed_variance, CRITIC_KEY: summed_variance},
                          std={POLICY_KEY: normalizer.std, CRITIC_KEY: std})
