@@ -100,14 +100,15 @@ def run_episode(policy: OnnxPolicy, env: NativeEnv, seed: int, record: bool = Fa
     policy instead of the task's own random commands; a source with a `goal` (the path follower)
     also moves the goal marker, and one that is `finished` ends the episode. A navigation policy
     given `waypoints` reports the path as the follower does, and `end_at_path` ends its episode at
-    the last waypoint. Velocity policies record their commands and velocities."""
+    the last waypoint. Policies driven by commands record them and the velocities reached; a
+    recorded path also the waypoints reached at every step."""
     waypoints = len(env.config.waypoints) if env.task.follows_waypoints and source is None else 0
     obs = env.reset(seed=seed)
     if hasattr(source, "reset"):
         source.reset(env.data.qpos[:2])
     start_goal_dist = env.goal_distance()
-    qpos, goals = [env.data.qpos.copy()], [env.goal]
-    commanding = env.task.uses_command
+    qpos, goals, reached = [env.data.qpos.copy()], [env.goal], [0]
+    commanding = env.task.uses_command and not waypoints  # a drive policy given waypoints walks in goal mode
     track = {"command": [], "commanded": [], "velocity": []}
     total, feet_only, steps, first_arrival, path_done = 0.0, 0, 0, None, None
     stance, power, xy = [], [], []  # per step, for the gait (hexa_mjx.evaluation.gait)
@@ -134,6 +135,7 @@ def run_episode(policy: OnnxPolicy, env: NativeEnv, seed: int, record: bool = Fa
         if record or commanding:
             qpos.append(env.data.qpos.copy())
             goals.append(env.goal)
+            reached.append(source.reached if hasattr(source, "reached") else info["goals_reached"])
         if path_done is None and (source.completed if hasattr(source, "completed")
                                   else waypoints and info["goals_reached"] >= waypoints):
             path_done = steps  # the path's time: when its last waypoint counted, not the episode's end
@@ -157,7 +159,7 @@ def run_episode(policy: OnnxPolicy, env: NativeEnv, seed: int, record: bool = Fa
         errors = episode_errors(*(np.array(track[k]) for k in ("commanded", "velocity", "command")), env.dt)
         result.update(velocity_rms=errors.get("velocity_rms"), yaw_rate_rms=errors.get("yaw_rate_rms"))
     if record or commanding:
-        result["trajectory"] = {"qpos": np.array(qpos), "goal": np.array(goals),
+        result["trajectory"] = {"qpos": np.array(qpos), "goal": np.array(goals), "reached": np.array(reached),
                                 **({k: np.array(v) for k, v in track.items()} if commanding else {})}
     return result
 

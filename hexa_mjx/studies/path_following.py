@@ -27,26 +27,6 @@ PATHS = {"square": [(2.0, 0.0), (2.0, 2.0), (0.0, 2.0), (0.0, 0.0)],
          "zigzag": [(1.0, 0.5), (2.0, -0.5), (3.0, 0.5), (4.0, -0.5)]}
 
 
-def walk(policy, env, seed: int, source=None) -> tuple[np.ndarray, np.ndarray, bool]:
-    """One episode: (qpos per step, waypoints reached per step, fell)."""
-    obs = env.reset(seed=seed)
-    if source is not None:
-        source.reset(env.data.qpos[:2])
-    qpos, reached, fell = [env.data.qpos.copy()], [0], False
-    for step in range(env.config.episode_length):
-        if source is not None:
-            env.set_command([*source(step * env.dt, env), 0.0])
-            env.set_goal(source.goal)
-            obs = env.observe()
-        obs, _, terminated, truncated, info = env.step(policy(obs))
-        qpos.append(env.data.qpos.copy())
-        reached.append(source.reached if source is not None else info["goals_reached"])
-        if terminated or truncated:
-            fell = info["fell"]
-            break
-    return np.array(qpos), np.array(reached), fell
-
-
 def compare(velocity_path: str, navigate_path: str, paths: dict, episodes: int, seed: int = 0,
             speed: float = 0.5, episode_length: int = 3000) -> dict:
     """Per path: the follower's and the navigation policy's waypoint figures."""
@@ -63,7 +43,8 @@ def compare(velocity_path: str, navigate_path: str, paths: dict, episodes: int, 
                 if follow:
                     source = commands.PathFollower(env.robot.start_xy + np.asarray(points), env.task.command_ranges,
                                                    speed=speed, success_radius=env.config.success_radius)
-                runs.append(walk(policy, env, seed + i, source))
+                episode = player.run_episode(policy, env, seed + i, record=True, source=source)
+                runs.append((episode["trajectory"]["qpos"], episode["trajectory"]["reached"], episode["fell"]))
             steps = max(len(q) for q, _, _ in runs) - 1
             qpos = np.zeros((steps, episodes, env.mj_model.nq))
             completed, alive = np.zeros((steps, episodes)), np.zeros((steps, episodes))
