@@ -158,8 +158,9 @@ def drive_onnx(tmp_path_factory):
     from hexa_mjx.training import checkpoints, loop
 
     run_dir = tmp_path_factory.mktemp("drive") / "run"
-    cfg = config.validate(config.parse_args(["--task", "drive", "--init_from", str(robot.REPO_ROOT / "policies" / "navigate"),
-                                             "--cpu_devices", "1", "--run_dir", str(run_dir)]))
+    navigate = str(robot.REPO_ROOT / "policies" / "navigate")
+    cfg = config.validate(config.parse_args(["--task", "drive", "--init_from", navigate, "--cpu_devices", "1",
+                                             "--run_dir", str(run_dir)]))
     env = config.make_env_for(cfg)
     step, params = loop.load_start(cfg, env, networks.templates(cfg, env)[0])
     (run_dir / "config.json").write_text(json.dumps(dataclasses.asdict(cfg)))

@@ -181,7 +181,8 @@ class Episode:
                               goal, bad, non_foot, done, completed, power, ground=self.robot.ground(qpos[:2]),
                               air_time=air_time, working=1.0 - info["failed_legs"], stance_avg=stance_avg, **gait)
         terms.update(self.task.reward_terms(self.active, prev_qpos, qpos, qvel, goal, heading, command))
-        terms = self.task.mask_terms({name: terms[name] for name in self.active}, command)  # the scales' order: the reward sums in it
+        # In the scales' order: the reward sums in it.
+        terms = self.task.mask_terms({name: terms[name] for name in self.active}, command)
 
         t = info["t"] + 1
         over = done | (t >= cfg.episode_length)
