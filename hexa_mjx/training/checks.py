@@ -139,7 +139,7 @@ def validate(cfg: TrainConfig, writes: bool = True) -> TrainConfig:
 
 # What fixes the shapes of a run's params: a fine-tuning run must match its source in these.
 PARAM_SHAPE = ("model", "hidden", "policy_dist")
-NOTED: set[str] = set()  # --init_from sources already noted as another task's
+NOTED: set[tuple[str, str]] = set()  # (--init_from, task) pairs already noted: said once per run
 
 
 def init_checkpoint(cfg: TrainConfig) -> Path:
@@ -161,12 +161,12 @@ def init_checkpoint(cfg: TrainConfig) -> Path:
             differ.append(f"task {source.task!r} there, observing {sizes[0]} values, {cfg.task!r} here, {sizes[1]}")
         elif sizes[0] != sizes[1] and (cfg.privileged_critic or source.privileged_critic):
             differ.append(f"a {cfg.task}-task run widens a {source.task}-task policy only without privileged_critic")
-        elif sizes[0] != sizes[1] and cfg.init_from not in NOTED:
-            NOTED.add(cfg.init_from)
+        elif sizes[0] != sizes[1] and (cfg.init_from, cfg.task) not in NOTED:
+            NOTED.add((cfg.init_from, cfg.task))
             print(f"note: --init_from {cfg.init_from} is a {source.task}-task policy; the {cfg.task} task observes "
                   f"{sizes[1] - sizes[0]} values more, which its networks start with zero weights on")
-        elif not differ and cfg.init_from not in NOTED:  # validated more than once per run: said once
-            NOTED.add(cfg.init_from)
+        elif not differ and (cfg.init_from, cfg.task) not in NOTED:  # validated more than once per run
+            NOTED.add((cfg.init_from, cfg.task))
             print(f"note: --init_from {cfg.init_from} is a {source.task}-task policy; its first inputs mean other "
                   f"things in the {cfg.task} task, and training adapts it from there")
     if source.privileged_critic and not cfg.privileged_critic:
