@@ -155,20 +155,23 @@ def init_checkpoint(cfg: TrainConfig) -> Path:
     differ = [f"{k} {getattr(source, k)!r} there, {getattr(cfg, k)!r} here" for k in PARAM_SHAPE
               if getattr(source, k) != getattr(cfg, k)]
     if source.task != cfg.task:  # another task's policy fits if it observes as many values, or a prefix
-        sizes = [observation_size(t, cfg.model) for t in (source.task, cfg.task)]
-        layouts = [task_class(t).layout(robot_joints(cfg.model)) for t in (source.task, cfg.task)]
-        if sizes[0] != sizes[1] and not warm_start.extends(*layouts):
+        joints = robot_joints(cfg.model)
+        layouts = [task_class(t).layout(joints) for t in (source.task, cfg.task)]
+        sizes = [layout[-1][1] for layout in layouts]
+        noted = (cfg.init_from, cfg.task) in NOTED  # validated more than once per run: said once
+        if sizes[0] == sizes[1]:
+            if not differ and not noted:
+                NOTED.add((cfg.init_from, cfg.task))
+                print(f"note: --init_from {cfg.init_from} is a {source.task}-task policy; its first inputs mean other "
+                      f"things in the {cfg.task} task, and training adapts it from there")
+        elif not warm_start.extends(*layouts):
             differ.append(f"task {source.task!r} there, observing {sizes[0]} values, {cfg.task!r} here, {sizes[1]}")
-        elif sizes[0] != sizes[1] and (cfg.privileged_critic or source.privileged_critic):
+        elif cfg.privileged_critic or source.privileged_critic:
             differ.append(f"a {cfg.task}-task run widens a {source.task}-task policy only without privileged_critic")
-        elif sizes[0] != sizes[1] and (cfg.init_from, cfg.task) not in NOTED:
+        elif not noted:
             NOTED.add((cfg.init_from, cfg.task))
             print(f"note: --init_from {cfg.init_from} is a {source.task}-task policy; the {cfg.task} task observes "
                   f"{sizes[1] - sizes[0]} values more, which its networks start with zero weights on")
-        elif not differ and (cfg.init_from, cfg.task) not in NOTED:  # validated more than once per run
-            NOTED.add((cfg.init_from, cfg.task))
-            print(f"note: --init_from {cfg.init_from} is a {source.task}-task policy; its first inputs mean other "
-                  f"things in the {cfg.task} task, and training adapts it from there")
     if source.privileged_critic and not cfg.privileged_critic:
         differ.append("privileged_critic True there, False here")
     if differ:
