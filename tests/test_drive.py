@@ -46,16 +46,17 @@ def test_each_episode_is_in_one_mode_and_observes_only_its_own_inputs(drive_env,
     np.testing.assert_array_equal(np.asarray(drive.in_goal_mode(later.pipeline_state.userdata)), goal_mode)
     obs = np.asarray(states.obs)
     assert obs.shape == (EPISODES, TASKS["drive"].layout(18)[-1][1]) and obs.shape[1] == drive_env.observation_size
-    np.testing.assert_array_equal(obs[~goal_mode, :drive.GOAL_VALUES], 0.0)  # command mode: no goal
-    np.testing.assert_array_equal(obs[goal_mode, -3:], 0.0)  # goal mode: no command
+    np.testing.assert_array_equal(obs[:, -1], goal_mode)  # the mode, last
     np.testing.assert_allclose(np.linalg.norm(obs[goal_mode, :2], axis=1), 1.0, atol=1e-5)  # the goal's direction
-    moving = np.abs(obs[~goal_mode, -3:]).sum(1) > 0
+    moving = np.abs(obs[~goal_mode, :drive.LEAD]).sum(1) > 0
     assert moving.sum() >= 0.6 * (~goal_mode).sum()  # most commands ask to move (10% are zero)
-    # The navigate part of the observation is the navigate task's own.
-    nav = TASKS["navigate"](drive_env.config, drive_env.robot)
-    d = jax.tree.map(lambda x: x[np.flatnonzero(goal_mode)[0]], states.pipeline_state)
-    np.testing.assert_allclose(obs[goal_mode][0, :-3], nav.observe(d.qpos, d.qvel, d.ctrl, drive_env.goal(d),
-                                                                  drive_env.heading(d), d.userdata), atol=1e-6)
+    # Goal mode observes what the navigate task does; command mode what the velocity task does.
+    for mode, task in ((True, "navigate"), (False, "velocity")):
+        own = TASKS[task](drive_env.config, drive_env.robot)
+        i = np.flatnonzero(goal_mode == mode)[0]
+        d = jax.tree.map(lambda x: x[i], states.pipeline_state)
+        np.testing.assert_allclose(obs[i, :-1], own.observe(d.qpos, d.qvel, d.ctrl, drive_env.goal(d),
+                                                            drive_env.heading(d), d.userdata), atol=1e-6)
 
 
 def test_each_mode_is_paid_by_its_own_terms_and_reaches_goals_only_in_goal_mode(drive_env, drive_run):
@@ -96,8 +97,8 @@ def test_waypoints_are_walked_in_goal_mode_and_a_keyboard_command_in_command_mod
         assert drive.in_goal_mode(env.command)
     env.set_command([0.3, 0.0, 0.0, 0.0])  # what play.py's keyboard and the path follower write
     assert not drive.in_goal_mode(env.command)
-    np.testing.assert_allclose(env.observe()[-3:], [0.3, 0.0, 0.0], atol=1e-6)
-    np.testing.assert_array_equal(env.observe()[:drive.GOAL_VALUES], 0.0)
+    np.testing.assert_allclose(env.observe()[:drive.LEAD], [0.3, 0.0, 0.0], atol=1e-6)
+    assert env.observe()[-1] == 0.0
 
 
 def test_eval_figures_come_from_each_mode_own_episodes(drive_env):
@@ -116,15 +117,20 @@ def test_eval_figures_come_from_each_mode_own_episodes(drive_env):
 
 
 def test_a_navigation_policy_starts_a_drive_run_acting_as_before(capsys, tmp_path):
-    navigate = str(robot.REPO_ROOT / "policies" / "navigate")
-    cfg = config.parse_args(["--task", "drive", "--init_from", navigate, "--run_dir", str(tmp_path / "a")])
-    assert config.validate(cfg).init_from == navigate
-    assert "observes 3 values more" in capsys.readouterr().out
+    for source in ("navigate", "velocity"):  # both tasks' shipped policies start a drive run
+        path = str(robot.REPO_ROOT / "policies" / source)
+        cfg = config.parse_args(["--task", "drive", "--init_from", path, "--run_dir", str(tmp_path / source)])
+        assert config.validate(cfg).init_from == path
+        assert "observes 1 more value(s)" in capsys.readouterr().out
     with pytest.raises(config.ConfigError, match="only without privileged_critic"):
         config.validate(dataclasses.replace(cfg, privileged_critic=True))
-    # A drive policy's params do not start a navigate run: it reads fewer values.
-    assert not warm_start.extends(TASKS["drive"].layout(18), TASKS["navigate"].layout(18))
-    assert not warm_start.extends(TASKS["velocity"].layout(18), TASKS["drive"].layout(18))
+    layout = TASKS["drive"].layout(18)
+    # A drive policy's params do not start a navigate run: it reads more values.
+    assert not warm_start.extends(layout, TASKS["navigate"].layout(18))
+    # Past the lead of task inputs every slice must match: proprioception out of place does not fit.
+    moved = [*layout[:5], (*layout[5][:3], "other units"), *layout[6:]]
+    assert warm_start.extends(TASKS["navigate"].layout(18), layout)
+    assert not warm_start.extends(TASKS["navigate"].layout(18), moved)
 
     small = config.TrainConfig(task="navigate", hidden=[16, 16])
     nav_env, env = config.make_env_for(small), config.make_env_for(dataclasses.replace(small, task="drive"))
@@ -137,7 +143,7 @@ def test_a_navigation_policy_starts_a_drive_run_acting_as_before(capsys, tmp_pat
     wide = warm_start.widened(params, template)
     assert jax.tree.structure(wide) == jax.tree.structure(template)
     obs = rng.normal(size=(8, nav_env.observation_size)).astype(np.float32)
-    command = rng.normal(size=(8, 3)).astype(np.float32)
+    command = rng.normal(size=(8, 1)).astype(np.float32)  # the mode, as any value
     key = jax.random.PRNGKey(0)
     before = networks.make_inference(small, nav_env, params)(obs, key)
     after = networks.make_inference(dataclasses.replace(small, task="drive"), env, wide)(
@@ -172,9 +178,9 @@ def test_export_names_the_command_where_the_drive_observation_holds_it(drive_onn
     from hexa_mjx.deploy import export
 
     meta = export.read_metadata(drive_onnx[1])
-    assert meta["task"] == "drive" and meta["observation_size"] == 70
-    assert [f["observation_index"] for f in meta["command"]] == [67, 68, 69]
-    assert meta["observation_layout"][-1]["what"].startswith("command")
+    assert meta["task"] == "drive" and meta["observation_size"] == 68
+    assert [f["observation_index"] for f in meta["command"]] == [0, 1, 2]
+    assert meta["observation_layout"][-1]["what"].startswith("mode")
 
 
 def test_the_battery_walks_a_drive_policy_by_commands_or_in_its_goal_mode(drive_onnx):

@@ -7,10 +7,14 @@ and figures. The mode is physics state like the command: the userdata's last val
 task's heading-mode flag) is GOAL_MODE in goal mode, so play.py's keyboard and the path follower,
 which write (vx, vy, yaw rate, 0), drive a drive policy in command mode.
 
-The observation is the navigate task's with the commanded (vx, vy, yaw rate) appended: in command
-mode the goal's direction and distance read 0, in goal mode the command does. Since it extends the
-navigate observation, a run can start from a navigation policy (`--init_from`), whose first
-layer then gains zero weights on the command (hexa_mjx.training.warm_start).
+The observation is the navigate task's with the mode appended (1 in goal mode, 0 in command
+mode), and its first three values hold what the mode asks for: the goal's direction and distance
+in goal mode, the commanded (vx, vy, yaw rate) in command mode, where the velocity task holds it.
+Both tasks' policies thus start a drive run (`--init_from`): their first layer gains zero weights
+on the mode (hexa_mjx.training.warm_start). A navigation policy starts command mode where the
+velocity recipe starts its whole training, reading the command where it read the goal; a first
+design that appended the command after zeroed goal slots left it as unused as a policy trained
+from scratch (docs/RESULTS.md, "The drive task").
 """
 
 from __future__ import annotations
@@ -24,7 +28,7 @@ from hexa_mjx.tasks.navigate import NavigateTask
 from hexa_mjx.tasks.velocity import VelocityTask
 
 GOAL_MODE = 2.0  # the userdata's last value in goal mode (the velocity task's heading mode is 1)
-GOAL_VALUES = 3  # the navigate observation's goal direction (2) and distance (1), first
+LEAD = 3  # the observation's first values: the goal's direction (2) and distance (1), or the command
 GOAL_TERMS = frozenset(rewards.GOAL_TERMS)  # paid in goal mode only
 COMMAND_TERMS = frozenset(VelocityTask.terms)  # paid in command mode only
 # What the checkpoint choice weighs goals by: 10 goals per episode, about the shipped navigation
@@ -108,21 +112,17 @@ class DriveTask(VelocityTask):
     def observe(self, qpos, qvel, ctrl, goal, heading, command):
         xp = namespace(qpos)
         seen = self.navigation.observe(qpos, qvel, ctrl, goal, heading, command)
-        goal_slots = xp.arange(seen.shape[0]) < GOAL_VALUES
-        seen = xp.where(goal_slots & ~in_goal_mode(command), 0.0, seen)
-        return xp.concatenate([seen, self.commanded(command, qpos, heading).astype(seen.dtype)])
+        goal_mode = in_goal_mode(command)
+        lead = xp.where(goal_mode, seen[:LEAD], self.commanded(command, qpos, heading).astype(seen.dtype))
+        return xp.concatenate([lead, seen[LEAD:], goal_mode.astype(seen.dtype)[None]])
 
     @classmethod
     def layout(cls, joints):
-        navigation = NavigateTask.layout(joints)
-        end = navigation[-1][1]
-        return [*navigation, (end, end + 3, "command (vx, vy, yaw rate), heading frame; 0 in goal mode",
-                              "m/s, m/s, rad/s")]
-
-    def command_fields(self) -> list[dict]:
-        start = self.layout(len(self.robot.ctrl_lo))[-1][0]
-        return [{**field, "observation_index": start + field["observation_index"]}
-                for field in super().command_fields()]
+        (_, _, direction, _), (_, _, distance, _), *rest = NavigateTask.layout(joints)
+        end = rest[-1][1]
+        return [(0, 2, f"goal mode: {direction}; command mode: the command's (vx, vy), heading frame", "- or m/s"),
+                (2, 3, f"goal mode: {distance}; command mode: the command's yaw rate", "m or rad/s"),
+                *rest, (end, end + 1, "mode: 1 in goal mode, 0 in command mode", "-")]
 
     def deployment_settings(self) -> dict:
         return self.navigation.deployment_settings()

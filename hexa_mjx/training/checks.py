@@ -171,7 +171,8 @@ def init_checkpoint(cfg: TrainConfig) -> Path:
         elif not noted:
             NOTED.add((cfg.init_from, cfg.task))
             print(f"note: --init_from {cfg.init_from} is a {source.task}-task policy; the {cfg.task} task observes "
-                  f"{sizes[1] - sizes[0]} values more, which its networks start with zero weights on")
+                  f"{sizes[1] - sizes[0]} more value(s), which its networks start with zero weights on, and its "
+                  "first inputs may mean other things there (docs/TASKS.md)")
     if source.privileged_critic and not cfg.privileged_critic:
         differ.append("privileged_critic True there, False here")
     if differ:

@@ -1,7 +1,8 @@
 """Networks that read more values than the params they start from: zero weights on the added inputs.
 
 A run may start (`--init_from`) from a policy whose task observes a prefix of what this run's task
-observes: the drive task's observation is the navigate task's with the command appended. The
+observes: the drive task's observation is the navigate task's (or the velocity task's, but for the
+meaning of its first values) with the mode appended. The
 source's first layers gain zero rows for the added values and its observation statistics gain
 mean 0, std 1 for them, so the widened networks compute exactly what the source's did until
 training moves those weights. The privileged critic widens its value network the same way
@@ -47,8 +48,13 @@ def widened(params, template):
 
 
 def extends(source_layout, layout) -> bool:
-    """Whether an observation `layout` starts with every slice of `source_layout` (the same values
-    in the same places and units) and adds values after them."""
-    if len(layout) <= len(source_layout):
+    """Whether an observation `layout` holds `source_layout`'s values in the same places and adds
+    values after them. A lead of task inputs (a goal, a command) may differ in meaning, as between
+    tasks of the same length; from the first slice that matches in place and units on, every slice
+    must match."""
+    end = source_layout[-1][1]
+    if layout[-1][1] <= end or end not in {t[1] for t in layout}:
         return False
-    return all((s[0], s[1], s[3]) == (t[0], t[1], t[3]) for s, t in zip(source_layout, layout))
+    place = {(t[0], t[1], t[3]) for t in layout}
+    matches = [(s[0], s[1], s[3]) in place for s in source_layout]
+    return any(matches) and all(matches[matches.index(True):])
