@@ -143,14 +143,14 @@ def test_a_navigation_policy_starts_a_drive_run_acting_as_before(capsys, tmp_pat
     wide = warm_start.widened(params, template)
     assert jax.tree.structure(wide) == jax.tree.structure(template)
     obs = rng.normal(size=(8, nav_env.observation_size)).astype(np.float32)
-    command = rng.normal(size=(8, 1)).astype(np.float32)  # the mode, as any value
+    mode = rng.normal(size=(8, 1)).astype(np.float32)  # the mode input, at any value
     key = jax.random.PRNGKey(0)
     before = networks.make_inference(small, nav_env, params)(obs, key)
     after = networks.make_inference(dataclasses.replace(small, task="drive"), env, wide)(
-        np.concatenate([obs, command], axis=1), key)
+        np.concatenate([obs, mode], axis=1), key)
     np.testing.assert_allclose(after, before, rtol=1e-5, atol=1e-6)
     drive_nets, nav_nets = networks.make_networks(small, env), networks.make_networks(small, nav_env)
-    np.testing.assert_allclose(drive_nets.value_network.apply(wide[0], wide[2], np.concatenate([obs, command], 1)),
+    np.testing.assert_allclose(drive_nets.value_network.apply(wide[0], wide[2], np.concatenate([obs, mode], 1)),
                                nav_nets.value_network.apply(params[0], params[2], obs), rtol=1e-5, atol=1e-5)
 
 
