@@ -74,6 +74,20 @@ def test_each_mode_is_paid_by_its_own_terms_and_reaches_goals_only_in_goal_mode(
     assert goals[goal_mode].min() >= 1 and goals[~goal_mode].max() == 0
 
 
+def test_command_mode_gain_weighs_every_term_of_a_command_step_and_leaves_goal_steps(drive_env):
+    terms = {name: np.full(2, 3.0, np.float32) for name in ("goal_approach", "tracking_lin_vel", "stability")}
+    command = np.array([[0.2, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, drive.GOAL_MODE]], np.float32)  # command, goal
+    plain = TASKS["drive"](drive_env.config, drive_env.robot).mask_terms(terms, command)
+    gained = TASKS["drive"](dataclasses.replace(drive_env.config, command_mode_gain=2.5),
+                            drive_env.robot).mask_terms(terms, command)
+    assert {k: v.tolist() for k, v in plain.items()} == {"goal_approach": [0.0, 3.0], "tracking_lin_vel": [3.0, 0.0],
+                                                         "stability": [3.0, 3.0]}
+    assert {k: v.tolist() for k, v in gained.items()} == {"goal_approach": [0.0, 3.0], "tracking_lin_vel": [7.5, 0.0],
+                                                          "stability": [7.5, 3.0]}
+    with pytest.raises(ValueError, match="command_mode_gain is a factor above 0"):
+        NativeEnv(dataclasses.replace(drive_env.config, command_mode_gain=0.0))
+
+
 def test_native_engine_observes_and_scores_what_mjx_does(drive_env, drive_run):
     states, _, _ = drive_run
     native = NativeEnv(drive_env.config)

@@ -95,6 +95,8 @@ class EnvConfig:
                                                 "instead of a yaw rate (legged_gym's heading mode)")
     goal_mode_share: float = setting(0.5, "drive: share of the episodes in goal mode (the navigate task's goals); "
                                           "the rest follow velocity commands. A waypoint path is walked in goal mode")
+    command_mode_gain: float = setting(1.0, "drive: every reward term of a command-mode step is multiplied by "
+                                            "this, so that the two modes' advantages weigh alike in PPO's batch")
     # Leg failure: a failed leg's three servos stop working. The policy is not told which leg failed.
     disabled_legs: tuple = setting((), "legs whose servos fail in every episode, e.g. \"3\" or \"1 4\" "
                                        "(numbers from 1)")
@@ -211,6 +213,8 @@ def check_config(config: EnvConfig) -> None:
     if not (math.isfinite(config.yaw_tracking_sigma) and config.yaw_tracking_sigma >= 0):
         raise ValueError(f"yaw_tracking_sigma is a width above 0 (or 0 for tracking_sigma's), got "
                          f"{config.yaw_tracking_sigma}")
+    if not (math.isfinite(config.command_mode_gain) and config.command_mode_gain > 0):
+        raise ValueError(f"command_mode_gain is a factor above 0, got {config.command_mode_gain}")
     for name in ("command_zero_share", "command_heading_share", "goal_mode_share"):
         if not 0 <= getattr(config, name) <= 1:
             raise ValueError(f"{name} is a share from 0 to 1, got {getattr(config, name)}")

@@ -77,6 +77,7 @@ class TrainConfig:
     yaw_tracking_sigma: float = env_field("yaw_tracking_sigma")
     command_heading_share: float = env_field("command_heading_share")
     goal_mode_share: float = env_field("goal_mode_share")
+    command_mode_gain: float = env_field("command_mode_gain")
     leg_failure: str = env_field("leg_failure")
     leg_failure_rate: float = env_field("leg_failure_rate")
     leg_failure_weights: list = env_field("leg_failure_weights")
