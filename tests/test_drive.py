@@ -12,11 +12,17 @@ import pytest
 import hexa_mjx
 from hexa_mjx.engines.native import NativeEnv
 from hexa_mjx.evaluation import evaluate, table
+from hexa_mjx.mdp.config import make_config
 from hexa_mjx.robot import constants as robot
 from hexa_mjx.tasks import TASKS, drive
 from hexa_mjx.training import config, networks, warm_start
 
 EPISODES = 32
+
+
+def drive_env_config():
+    return make_config("drive", episode_length=30, command_interval=10 / 60.0, goal_min_distance=0.2,
+                       goal_max_distance=0.3, goal_mode_share=0.0, reward_scales={"tracking_ang_vel": 10.0})
 
 
 @pytest.fixture(scope="module")
@@ -86,6 +92,26 @@ def test_command_mode_gain_weighs_every_term_of_a_command_step_and_leaves_goal_s
                                                           "stability": [7.5, 3.0]}
     with pytest.raises(ValueError, match="command_mode_gain is a factor above 0"):
         NativeEnv(dataclasses.replace(drive_env.config, command_mode_gain=0.0))
+
+
+def test_a_gained_run_reads_its_tracking_as_an_ungained_one_does():
+    """The progress line and the checkpoint choice read a run's tracking at the weight it was paid at."""
+    from hexa_mjx.training import checks
+    from hexa_mjx.tasks.velocity import VelocityTask
+
+    figures = []
+    for gain in (1.0, 2.5):
+        env = NativeEnv(dataclasses.replace(drive_env_config(), command_mode_gain=gain))
+        env.reset(seed=3)
+        paid = {"tracking_lin_vel": 0.0, "tracking_ang_vel": 0.0}
+        for i in range(20):
+            terms = env.step(np.random.default_rng(i).uniform(-1, 1, 18))[4]["terms"]
+            paid = {k: v + terms[k] * env.scales[k] for k, v in paid.items()}
+        row = {"episode_length": 20, **{f"eval/episode_reward/{k}": v for k, v in paid.items()}}
+        cfg = config.TrainConfig(task="drive", command_mode_gain=gain, reward_scale=["tracking_ang_vel=10"])
+        figures.append(VelocityTask.tracking(row, checks.run_scales(cfg)))
+    assert 0 < figures[0][0] < 1 and 0 < figures[0][1] < 1
+    np.testing.assert_allclose(figures[1], figures[0], rtol=1e-6)
 
 
 def test_native_engine_observes_and_scores_what_mjx_does(drive_env, drive_run):

@@ -128,6 +128,12 @@ class Task:
     # -- figures --------------------------------------------------------------
 
     @classmethod
+    def paid_scales(cls, scales: dict, config) -> dict:
+        """The weight each term is paid at where it is paid, for reading a run's rows: `scales`,
+        but for a task that weighs some steps' terms again (the drive task's command_mode_gain)."""
+        return scales
+
+    @classmethod
     def progress_figure(cls, row: dict, scales: dict) -> str:
         """The task's figure on the progress line, from an evaluation row of a run trained with
         reward `scales`."""

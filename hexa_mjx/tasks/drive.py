@@ -140,6 +140,12 @@ class DriveTask(VelocityTask):
         return f"{NavigateTask.progress_figure(row, scales)}  {VelocityTask.progress_figure(row, scales)}"
 
     @classmethod
+    def paid_scales(cls, scales: dict, config) -> dict:
+        """The command terms are paid in command mode alone, at their scale times command_mode_gain."""
+        return {name: value * config.command_mode_gain if name in COMMAND_TERMS else value
+                for name, value in scales.items()}
+
+    @classmethod
     def selection_score(cls, row: dict, scales: dict) -> float:
         """Tracking over every step (goal-mode steps count 0) plus goals per episode over
         GOALS_PER_TRACKING, less the falls' share."""

@@ -46,11 +46,12 @@ def check_ranges(cfg: TrainConfig) -> None:
 
 
 def run_scales(cfg: TrainConfig) -> dict[str, float]:
-    """The reward scales a run trains with: its task's table for --reward, ablations and
-    --reward_scale overrides applied (ConfigError on a malformed or unknown override)."""
+    """The reward scales a run trains with, as its rows are read: its task's table for --reward,
+    ablations and --reward_scale overrides applied, each term at the weight it is paid at
+    (`Task.paid_scales`); ConfigError on a malformed or unknown override."""
     task = task_class(cfg.task)
-    return rewards.make_scales(task.rewards[cfg.reward or default_reward(cfg.task)], cfg.ablate, reward_overrides(cfg),
-                               task.terms)
+    return task.paid_scales(rewards.make_scales(task.rewards[cfg.reward or default_reward(cfg.task)], cfg.ablate,
+                                                reward_overrides(cfg), task.terms), cfg)
 
 
 def reward_overrides(cfg: TrainConfig) -> dict[str, float]:
