@@ -243,3 +243,10 @@ def test_the_battery_walks_a_drive_policy_by_commands_or_in_its_goal_mode(drive_
     assert not drive.in_goal_mode(env.command)
     with pytest.raises(ValueError, match="goal mode is a drive policy's"):
         generalist.battery(str(robot.REPO_ROOT / "policies" / "velocity.onnx"), 1, groups=["flat"], goal_mode=True)
+
+
+def test_the_mode_advantage_study_refuses_a_policy_without_modes():
+    from hexa_mjx.studies import mode_advantages
+
+    with pytest.raises(SystemExit, match="navigate policy; this study splits a drive policy"):
+        mode_advantages.spreads(robot.REPO_ROOT / "policies" / "navigate")
