@@ -146,7 +146,9 @@ class Task:
         return row["success_rate"] - row["fall_rate"]
 
     def evaluation(self, env, start_qpos, traj, alive, fell) -> tuple[dict, dict]:
-        """The task's own figures for eval.py: (summary entries, per-episode entries)."""
+        """The task's own figures for eval.py: (summary entries, per-episode entries). A per-episode
+        entry is a dict of them, a list with one value per episode, or a list of records each
+        naming its episode's index under "episode" (the drive task renumbers each mode's)."""
         return {}, {}
 
     @classmethod

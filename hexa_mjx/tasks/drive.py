@@ -186,12 +186,14 @@ class DriveTask(VelocityTask):
 
 
 def _reindexed(value, idx):
-    """A mode's per-episode entry with its episodes numbered as in the whole evaluation: goal
-    records carry their episode's index; per-episode lists become {episode index: value}."""
-    if isinstance(value, list) and value and isinstance(value[0], dict) and "episode" in value[0]:
-        return [{**record, "episode": int(idx[record["episode"]])} for record in value]
+    """A mode's per-episode entry (`Task.evaluation`'s forms) with its episodes numbered as in the
+    whole evaluation: records by their "episode", a list of one value per episode as
+    {episode index: value}."""
     if isinstance(value, dict):
         return {k: _reindexed(v, idx) for k, v in value.items()}
+    if isinstance(value, list) and all(isinstance(r, dict) and "episode" in r for r in value):
+        return [{**record, "episode": int(idx[record["episode"]])} for record in value]
     if isinstance(value, list) and len(value) == len(idx):
         return {int(i): v for i, v in zip(idx, value)}
-    return value
+    raise ValueError(f"a per-episode entry is a list of {len(idx)} values or of records naming their episode; "
+                     f"got a {type(value).__name__}" + (f" of {len(value)}" if isinstance(value, list) else ""))
