@@ -103,8 +103,9 @@ class DriveTask(VelocityTask):
     def mask_terms(self, terms: dict, command) -> dict:
         """Each mode's own terms and the shared ones; a command-mode step's all times
         `command_mode_gain`. The goal terms' spread is larger (a bonus per goal, progress at walking
-        speed): at gain 1 the goal steps' advantages spread 2.6x as wide as the command steps',
-        and PPO normalizes them over one batch (docs/RESULTS.md, "The command mode's weight")."""
+        speed): at gain 1 the goal steps' advantages spread 1.8 to 2.6x as wide as the command
+        steps', and PPO normalizes them over one batch (docs/RESULTS.md, "What holds the command
+        mode back")."""
         goal_mode = in_goal_mode(command)
         xp = namespace(goal_mode)
         goal = goal_mode.astype(xp.float32)
