@@ -33,6 +33,9 @@ def spreads(ckpt: str | Path, envs: int = 128, steps: int = 400, seed: int = 1) 
     cfg = config.load_config(run_dir)
     if cfg.task != "drive":
         raise SystemExit(f"{ckpt} is a {cfg.task} policy; this study splits a drive policy's steps by mode")
+    if cfg.privileged_critic:
+        raise SystemExit(f"{ckpt} has a privileged critic, whose value network reads its own observation; this "
+                         "study computes advantages with a critic that reads the policy's")
     env = config.make_env_for(cfg)
     _, params = checkpoints.load_checkpoint(ckpt_dir, networks.init_params(cfg, env))
     policy = networks.policy_maker(cfg, env)(params, deterministic=False)
