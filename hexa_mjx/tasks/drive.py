@@ -110,9 +110,8 @@ class DriveTask(VelocityTask):
         xp = namespace(goal_mode)
         goal = goal_mode.astype(xp.float32)
         gain = (1.0 - goal) * self.config.command_mode_gain
-        share = {"goal": goal, "command": gain, "shared": goal + gain}
-        kind = lambda name: "goal" if name in GOAL_TERMS else "command" if name in COMMAND_TERMS else "shared"  # noqa: E731
-        return {name: value * share[kind(name)] for name, value in terms.items()}
+        return {name: value * (goal if name in GOAL_TERMS else gain if name in COMMAND_TERMS else goal + gain)
+                for name, value in terms.items()}
 
     # -- what the policy sees -------------------------------------------------
 
