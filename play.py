@@ -113,10 +113,10 @@ def main(argv=None) -> int:
         overrides = cli.env_overrides(args)
         if args.solver == "default":
             overrides.update(solver_iterations=100, ls_iterations=50)  # MuJoCo's defaults
-        velocity = TASKS[policy.metadata["task"]].uses_command
-        if velocity and args.waypoints and not args.follow:
+        velocity, by_goals = TASKS[policy.metadata["task"]].uses_command, TASKS[policy.metadata["task"]].follows_waypoints
+        if velocity and args.waypoints and not (args.follow or by_goals):
             raise ValueError("a velocity policy walks waypoints through the path follower: add --follow")
-        if args.waypoints and not (TASKS[policy.metadata["task"]].follows_waypoints or args.follow):
+        if args.waypoints and not (by_goals or args.follow):
             raise ValueError(f"--waypoints need a task that follows a path; this is a {policy.metadata['task']}-task "
                              "policy")
         if (args.commands or args.follow) and not velocity:
@@ -129,8 +129,9 @@ def main(argv=None) -> int:
         if not (0 < args.follow_speed <= 5):
             raise ValueError(f"--follow_speed is a speed in m/s above 0 (at most 5), got {args.follow_speed}")
         schedule = commands.Schedule(commands.load_schedule(args.commands)) if args.commands else None
-        if args.waypoints and velocity:
-            overrides.pop("waypoints")  # the follower walks them, not the task
+        if args.follow:
+            # The follower walks them, not the task; without it a drive policy walks them in goal mode.
+            overrides.pop("waypoints")
         env = player.env_for(policy, args.model, randomize=args.randomize, terrain_contacts=args.terrain_contacts,
                              **overrides)
         if args.json:
@@ -188,7 +189,7 @@ def main(argv=None) -> int:
     else:
         print(f"summary: falls {s['fall_rate']:.0%}, feet only {s['feet_only_share']:.1%} of steps; {rate}")
     t = None
-    if env.task.uses_command:
+    if env.task.uses_command and all("trajectory" in e for e in episodes):  # a drive policy's goal mode has none
         t = player.tracking(env, episodes)
         drift = t["stand_drift"]
         if t["steps"] and not args.follow:  # the follower's commands change every step: none settles

@@ -19,7 +19,7 @@ from hexa_mjx.engines.native import NativeEnv
 from hexa_mjx.tasks import TASKS
 
 POLICIES = robot.REPO_ROOT / "policies"
-SHIPPED = ("goal", "navigate", "velocity", "generalist", "leg_failure")  # policies/<name>: a run directory and its ONNX
+SHIPPED = ("goal", "navigate", "velocity", "generalist", "leg_failure", "drive")  # policies/<name>: a run directory and its ONNX
 # m/s: about three times the largest single-episode RMS error of the shipped velocity policy in
 # native MuJoCo at the model's solver over 32 episodes (0.069; over all 32, 0.050).
 VELOCITY_RMS_BOUND = 0.2
@@ -27,6 +27,10 @@ VELOCITY_RMS_BOUND = 0.2
 # (docs/RESULTS.md, "The shipped generalist policy"); the test walks two of each.
 GENERALIST_CONDITIONS = ({"terrain": "stairs", "terrain_seed": 1, "terrain_difficulty": 1.0},
                          {"disabled_legs": (6,), "failure_mode": "locked"})
+# Conditions the shipped drive policy walks in its goal mode in all 8 of the battery's episodes
+# (docs/RESULTS.md, "The shipped drive policy"); the test walks two of each.
+DRIVE_CONDITIONS = ({"terrain": "stairs", "terrain_seed": 1, "terrain_difficulty": 1.0},
+                    {"disabled_legs": (1,), "failure_mode": "limp"})
 
 
 @pytest.fixture(scope="module")
@@ -194,6 +198,24 @@ def test_shipped_generalist_walks_the_square_on_stairs_and_on_a_failed_leg():
         assert row["path_completed_rate"] == 1.0 and row["fall_rate"] == 0.0, (overrides, row)
 
 
+def test_shipped_drive_policy_follows_commands_and_walks_goals_on_a_limp_leg(shipped):
+    """Native MuJoCo: in command mode, random commands on intact legs, tracked as the velocity
+    policy's test bounds them; in goal mode, the 2 m square given as waypoints up and down 5 cm
+    stairs the training never saw, and on flat ground with a leg limp that it does not observe."""
+    from hexa_mjx.studies import generalist, robustness
+
+    policy = shipped["drive"][2]
+    env = player.env_for(policy, goal_mode_share=0.0, leg_failure="none")
+    results = [player.run_episode(policy, env, seed) for seed in range(3)]
+    summary, tracked = player.summarize(results), player.tracking(env, results)
+    assert summary["fall_rate"] == 0.0 and tracked["velocity_rms"] < VELOCITY_RMS_BOUND, (summary, tracked)
+    base = {**generalist.base_settings(terrain_contacts="mjx"), "goal_mode_share": 1.0}
+    conditions = [({**base, **overrides}, None) for overrides in DRIVE_CONDITIONS]
+    rows = robustness.run_conditions(str(POLICIES / "drive.onnx"), conditions, episodes=2, path=generalist.SQUARE)
+    for overrides, row in zip(DRIVE_CONDITIONS, rows):
+        assert row["path_completed_rate"] == 1.0 and row["fall_rate"] == 0.0, (overrides, row)
+
+
 def test_shipped_leg_failure_policy_walks_on_any_one_limp_leg():
     """Native MuJoCo, the leg-failure sweep's conditions at 2 seeded episodes each: intact, and each
     of the six legs limp, which the policy does not observe (docs/RESULTS.md, "The shipped
@@ -226,6 +248,20 @@ def test_play_writes_results_and_imports_no_jax(tmp_path):
     assert len(doc["episodes"]) == 2 and doc["model_matches_training"]
     assert {"success", "final_distance", "fell", "goals_reached"} <= set(doc["episodes"][0])
     assert (tmp_path / "v.mp4").stat().st_size > 10_000
+
+
+def test_play_walks_a_drive_policy_in_goal_mode_given_waypoints_and_by_commands_with_follow(tmp_path):
+    """--waypoints alone: the drive policy's goal mode takes them as goals; with --follow the path
+    follower's commands drive it in command mode, which also reports tracking."""
+    runs = {}
+    for mode, extra in (("goal", []), ("command", ["--follow"])):
+        out = tmp_path / f"{mode}.json"
+        proc = run_play("--policy", "policies/drive.onnx", "--waypoints", "1,0", "--leg_failure", "none", "--episodes",
+                        "1", "--episode_length", "600", "--no-video", "--json", str(out), *extra)
+        assert proc.returncode == 0, proc.stderr
+        runs[mode] = (proc.stdout, json.loads(out.read_text())["episodes"][0])
+    assert runs["goal"][1]["goals_reached"] >= 1 and "tracking" not in runs["goal"][0], runs["goal"]
+    assert runs["command"][1]["goals_reached"] == 0 and "every waypoint reached in 1 of 1" in runs["command"][0]
 
 
 def test_play_bad_input_is_one_line(tmp_path):
