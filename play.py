@@ -113,7 +113,8 @@ def main(argv=None) -> int:
         overrides = cli.env_overrides(args)
         if args.solver == "default":
             overrides.update(solver_iterations=100, ls_iterations=50)  # MuJoCo's defaults
-        velocity, by_goals = TASKS[policy.metadata["task"]].uses_command, TASKS[policy.metadata["task"]].follows_waypoints
+        trained = TASKS[policy.metadata["task"]]
+        velocity, by_goals = trained.uses_command, trained.follows_waypoints
         if velocity and args.waypoints and not (args.follow or by_goals):
             raise ValueError("a velocity policy walks waypoints through the path follower: add --follow")
         if args.waypoints and not (by_goals or args.follow):
