@@ -190,7 +190,8 @@ def main(argv=None) -> int:
     else:
         print(f"summary: falls {s['fall_rate']:.0%}, feet only {s['feet_only_share']:.1%} of steps; {rate}")
     t = None
-    if env.task.uses_command and all("trajectory" in e for e in episodes):  # a drive policy's goal mode has none
+    # Waypoints walked in a drive policy's goal mode record no commands to track.
+    if env.task.uses_command and all("trajectory" in e for e in episodes):
         t = player.tracking(env, episodes)
         drift = t["stand_drift"]
         if t["steps"] and not args.follow:  # the follower's commands change every step: none settles

@@ -19,7 +19,8 @@ from hexa_mjx.engines.native import NativeEnv
 from hexa_mjx.tasks import TASKS
 
 POLICIES = robot.REPO_ROOT / "policies"
-SHIPPED = ("goal", "navigate", "velocity", "generalist", "leg_failure", "drive")  # policies/<name>: a run directory and its ONNX
+# policies/<name>: a run directory and its ONNX
+SHIPPED = ("goal", "navigate", "velocity", "generalist", "leg_failure", "drive")
 # m/s: about three times the largest single-episode RMS error of the shipped velocity policy in
 # native MuJoCo at the model's solver over 32 episodes (0.069; over all 32, 0.050).
 VELOCITY_RMS_BOUND = 0.2
@@ -175,45 +176,44 @@ def test_shipped_policies_succeed_on_the_current_model(shipped, task, episodes):
         assert summary["goals_per_episode"] >= 5
 
 
-def test_shipped_velocity_policy_follows_its_commands_on_the_current_model(shipped):
-    policy = shipped["velocity"][2]
-    env = player.env_for(policy)
+def assert_tracks_commands(policy, **overrides):
+    """Three native episodes of the task's random commands: no fall, planar RMS error in bound."""
+    env = player.env_for(policy, **overrides)
     results = [player.run_episode(policy, env, seed) for seed in range(3)]
-    summary = player.summarize(results)
-    tracked = player.tracking(env, results)
-    # Native MuJoCo, three episodes of random commands (docs/RESULTS.md, "Velocity commands").
+    summary, tracked = player.summarize(results), player.tracking(env, results)
     assert summary["fall_rate"] == 0.0 and tracked["velocity_rms"] < VELOCITY_RMS_BOUND, (summary, tracked)
+
+
+def assert_walks_the_square(name, conditions, **settings):
+    """policies/<name>.onnx completes the battery's 2 m square in 2 of 2 episodes without a fall in
+    each condition (EnvConfig overrides over the battery's base, MJX's heightfield contacts)."""
+    from hexa_mjx.studies import generalist, robustness
+
+    base = {**generalist.base_settings(terrain_contacts="mjx"), **settings}
+    rows = robustness.run_conditions(str(POLICIES / f"{name}.onnx"), [({**base, **c}, None) for c in conditions],
+                                     episodes=2, path=generalist.SQUARE)
+    for overrides, row in zip(conditions, rows):
+        assert row["path_completed_rate"] == 1.0 and row["fall_rate"] == 0.0, (overrides, row)
+
+
+def test_shipped_velocity_policy_follows_its_commands_on_the_current_model(shipped):
+    # Native MuJoCo, three episodes of random commands (docs/RESULTS.md, "Velocity commands").
+    assert_tracks_commands(shipped["velocity"][2])
 
 
 def test_shipped_generalist_walks_the_square_on_stairs_and_on_a_failed_leg():
     """Native MuJoCo through the path follower, as the battery walks it (hexa_mjx.studies.generalist,
     MJX's heightfield contacts): the 2 m square up and down 5 cm stairs on a terrain the training
     never drew, and on flat ground with a leg the policy does not observe failed."""
-    from hexa_mjx.studies import generalist, robustness
-
-    base = generalist.base_settings(terrain_contacts="mjx")
-    conditions = [({**base, **overrides}, None) for overrides in GENERALIST_CONDITIONS]
-    rows = robustness.run_conditions(str(POLICIES / "generalist.onnx"), conditions, episodes=2, path=generalist.SQUARE)
-    for overrides, row in zip(GENERALIST_CONDITIONS, rows):
-        assert row["path_completed_rate"] == 1.0 and row["fall_rate"] == 0.0, (overrides, row)
+    assert_walks_the_square("generalist", GENERALIST_CONDITIONS)
 
 
 def test_shipped_drive_policy_follows_commands_and_walks_goals_on_a_limp_leg(shipped):
     """Native MuJoCo: in command mode, random commands on intact legs, tracked as the velocity
     policy's test bounds them; in goal mode, the 2 m square given as waypoints up and down 5 cm
     stairs the training never saw, and on flat ground with a leg limp that it does not observe."""
-    from hexa_mjx.studies import generalist, robustness
-
-    policy = shipped["drive"][2]
-    env = player.env_for(policy, goal_mode_share=0.0, leg_failure="none")
-    results = [player.run_episode(policy, env, seed) for seed in range(3)]
-    summary, tracked = player.summarize(results), player.tracking(env, results)
-    assert summary["fall_rate"] == 0.0 and tracked["velocity_rms"] < VELOCITY_RMS_BOUND, (summary, tracked)
-    base = {**generalist.base_settings(terrain_contacts="mjx"), "goal_mode_share": 1.0}
-    conditions = [({**base, **overrides}, None) for overrides in DRIVE_CONDITIONS]
-    rows = robustness.run_conditions(str(POLICIES / "drive.onnx"), conditions, episodes=2, path=generalist.SQUARE)
-    for overrides, row in zip(DRIVE_CONDITIONS, rows):
-        assert row["path_completed_rate"] == 1.0 and row["fall_rate"] == 0.0, (overrides, row)
+    assert_tracks_commands(shipped["drive"][2], goal_mode_share=0.0, leg_failure="none")
+    assert_walks_the_square("drive", DRIVE_CONDITIONS, goal_mode_share=1.0)
 
 
 def test_shipped_leg_failure_policy_walks_on_any_one_limp_leg():
@@ -252,7 +252,7 @@ def test_play_writes_results_and_imports_no_jax(tmp_path):
 
 def test_play_walks_a_drive_policy_in_goal_mode_given_waypoints_and_by_commands_with_follow(tmp_path):
     """--waypoints alone: the drive policy's goal mode takes them as goals; with --follow the path
-    follower's commands drive it in command mode, which also reports tracking."""
+    follower's commands drive it in command mode, which reaches the waypoints without goals."""
     runs = {}
     for mode, extra in (("goal", []), ("command", ["--follow"])):
         out = tmp_path / f"{mode}.json"
