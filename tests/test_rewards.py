@@ -28,6 +28,33 @@ def test_velocity_alignment_is_speed_toward_goal():
     assert scaled("velocity_alignment", jp.array([0.1, 0.1]), goal_dir) == pytest.approx(5 * np.hypot(0.1, 0.1) * np.cos(np.pi / 4))
 
 
+@pytest.mark.parametrize("xp", [np, jp], ids=["numpy", "jax"])
+def test_goal_speed_cap_pays_speed_toward_the_goal_up_to_the_cap_only(xp):
+    """Both goal terms, through rewards.terms as either engine calls it: a walk at 1.2 m/s toward
+    a goal 2 m ahead is paid as one at the 0.8 m/s cap; 0.5 m/s and a step away are paid in full."""
+    from hexa_mjx.mdp.config import EnvConfig
+
+    def paid(speed, cap):
+        config = EnvConfig(goal_speed_cap=cap)
+        qpos, qvel = np.zeros(25), np.zeros(24)
+        qpos[0], qvel[0] = speed / config.ctrl_hz, speed  # one control step toward +x at `speed`
+        out = rewards.terms(["goal_approach", "velocity_alignment"], config, xp.zeros(25), xp.asarray(qpos),
+                            xp.asarray(qvel), xp.asarray([2.0, 0.0]), 0, 0, False, False, 0.0)
+        return float(out["goal_approach"]) * config.ctrl_hz, float(out["velocity_alignment"])  # both in m/s
+
+    assert paid(1.2, 0.0) == pytest.approx((1.2, 1.2), rel=1e-4)
+    assert paid(1.2, 0.8) == pytest.approx((0.8, 0.8), rel=1e-4)
+    assert paid(0.5, 0.8) == pytest.approx((0.5, 0.5), rel=1e-4)
+    assert paid(-0.5, 0.8) == pytest.approx((-0.5, -0.5), rel=1e-4)
+
+
+def test_goal_speed_cap_is_a_speed():
+    from hexa_mjx.mdp.config import EnvConfig, check_config
+
+    with pytest.raises(ValueError, match="goal_speed_cap is a speed in m/s"):
+        check_config(EnvConfig(goal_speed_cap=-1.0))
+
+
 def test_goal_bonus_only_inside_radius():
     assert scaled("goal_bonus", jp.float32(0.49), 0.5) == 100.0
     assert scaled("goal_bonus", jp.float32(0.51), 0.5) == 0.0

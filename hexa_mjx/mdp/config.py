@@ -64,6 +64,10 @@ class EnvConfig:
     # Navigation: chained goals never ask the policy to stop, yet a path's last waypoint does. In
     # this share of episodes, after 0 to STAY_AFTER_MAX goals, the next goal stays where it is once
     # reached, and the in-radius bonus pays for standing on it (hexa_mjx.mdp.events.draw_stay_after).
+    # Navigation: the goal terms pay for approach and speed toward the goal up to this speed, so a
+    # policy walks at a cruise speed it can keep on a failed leg, as a path follower's commands ask.
+    goal_speed_cap: float = setting(0.0, "navigate, drive: m/s, the goal terms (approach, speed toward the goal) pay "
+                                         "for speed up to this and no more (0: no cap, the report's terms)")
     goal_stay_share: float = setting(0.0, f"navigate: share of episodes in which, after 0 to {STAY_AFTER_MAX} random "
                                           "goals, the goal stays put once reached, so the policy learns to stop and "
                                           "stand at a goal (waypoint paths: their last waypoint always stays)")
@@ -213,6 +217,8 @@ def check_config(config: EnvConfig) -> None:
     if not (math.isfinite(config.yaw_tracking_sigma) and config.yaw_tracking_sigma >= 0):
         raise ValueError(f"yaw_tracking_sigma is a width above 0 (or 0 for tracking_sigma's), got "
                          f"{config.yaw_tracking_sigma}")
+    if not (math.isfinite(config.goal_speed_cap) and config.goal_speed_cap >= 0):
+        raise ValueError(f"goal_speed_cap is a speed in m/s above 0 (or 0 for no cap), got {config.goal_speed_cap}")
     if not (math.isfinite(config.command_mode_gain) and config.command_mode_gain > 0):
         raise ValueError(f"command_mode_gain is a factor above 0, got {config.command_mode_gain}")
     for name in ("command_zero_share", "command_heading_share", "goal_mode_share"):

@@ -12,9 +12,10 @@ from hexa_mjx.robot.kinematics import namespace, roll_pitch
 
 
 
-def goal_approach(prev_dist, dist):
-    """Metres of distance to the goal closed this step (report: x1000)."""
-    return prev_dist - dist
+def goal_approach(prev_dist, dist, most=None):
+    """Metres of distance to the goal closed this step (report: x1000), at `most` metres if given."""
+    closed = prev_dist - dist
+    return closed if most is None else namespace(closed).minimum(closed, most)
 
 
 def goal_reached(completed):
@@ -22,9 +23,10 @@ def goal_reached(completed):
     return completed.astype("float32")
 
 
-def velocity_alignment(vel_xy, goal_dir_xy):
-    """|v| * (v_hat . g_hat) = planar speed toward the goal, m/s."""
-    return vel_xy @ goal_dir_xy
+def velocity_alignment(vel_xy, goal_dir_xy, most=None):
+    """|v| * (v_hat . g_hat) = planar speed toward the goal, m/s, at `most` m/s if given."""
+    toward = vel_xy @ goal_dir_xy
+    return toward if most is None else namespace(toward).minimum(toward, most)
 
 
 def goal_bonus(dist, success_radius, non_foot_contacts=0):
@@ -146,10 +148,11 @@ def terms(names, config, prev_qpos, qpos, qvel, goal_xy, bad_contacts, non_foot_
     # The previous position's distance to this step's goal (the goal only moves after the terms).
     dist_prev = xp.linalg.norm(goal_xy - prev_xy)
     roll, pitch = roll_pitch(qpos[3:7])
+    cap = config.goal_speed_cap  # m/s; 0 leaves the report's terms as they were
     inputs = {
-        "goal_approach": (dist_prev, dist),
+        "goal_approach": (dist_prev, dist, cap / config.ctrl_hz if cap else None),
         "goal_reached": (completed,),
-        "velocity_alignment": (vel_xy, goal_dir),
+        "velocity_alignment": (vel_xy, goal_dir, cap if cap else None),
         "goal_bonus": (dist, config.success_radius, non_foot_contacts if config.bonus_on_feet_only else 0),
         "stability": (roll, pitch),
         "height": (qpos[2] - ground, config.target_height),

@@ -66,6 +66,7 @@ class TrainConfig:
     start_yaw_noise: float = env_field("start_yaw_noise")
     goal_min_distance: float = env_field("goal_min_distance")
     goal_max_distance: float = env_field("goal_max_distance")
+    goal_speed_cap: float = env_field("goal_speed_cap")
     goal_stay_share: float = env_field("goal_stay_share")
     curriculum_levels: int = field(ENV, 0, ENV_FIELDS["curriculum_levels"].metadata["help"])  # training only
     command_vx: list = env_field("command_vx")
