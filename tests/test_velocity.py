@@ -228,8 +228,9 @@ def test_keyboard_steps_and_stops_within_the_ranges():
     assert not keys(0.0).any() and not keys.press(73)  # I is the goal viewer's, not a driving key
 
 
-def test_path_follower_walks_a_point_robot_around_the_square():
-    """A robot that does exactly what it is commanded follows the 2 m square to its end."""
+def _walk_the_square(start_drift=(0.0, 0.0)):
+    """A robot that does exactly what it is commanded, on the 2 m square from the origin; it stands
+    `start_drift` m off the start when the follower first reads it. Returns the follower and the path."""
     class Point:
         def __init__(self):
             self.data = type("D", (), {"qpos": np.array([0.0, 0, 0.12, 1, 0, 0, 0])})()
@@ -238,6 +239,7 @@ def test_path_follower_walks_a_point_robot_around_the_square():
     square = np.array([[2.0, 0], [2, 2], [0, 2], [0, 0]])
     follower = commands.PathFollower(square, ((-0.5, 1.0), (-0.5, 0.5), (-1.5, 1.5)))
     follower.reset(robot.data.qpos[:2])
+    robot.data.qpos[:2] += start_drift
     path = []
     for step in range(60 * 60):
         vx, vy, wz = follower(step * dt, robot)
@@ -246,12 +248,24 @@ def test_path_follower_walks_a_point_robot_around_the_square():
         h += dt * wz
         robot.data.qpos[3:7] = [np.cos(h / 2), 0, 0, np.sin(h / 2)]
         path.append(robot.data.qpos[:2].copy())
-    path = np.array(path)
+    return follower, square, np.array(path)
+
+
+def test_path_follower_walks_a_point_robot_around_the_square():
+    follower, square, path = _walk_the_square()
     assert follower.reached == 4 and np.linalg.norm(path[-1]) < 0.15
     corners = np.vstack([[0, 0], square])
     deviation = np.min([segment_distance(path, np.broadcast_to(a, path.shape), np.broadcast_to(b, path.shape))
                         for a, b in zip(corners[:-1], corners[1:])], axis=0)
     assert deviation.max() < 0.3  # corners are cut by less than the lookahead
+
+
+def test_path_follower_walks_a_closed_path_after_a_drift_at_the_start():
+    """2 cm back and 3 cm left of the start, nearer the square's last side (x = 0) than its first,
+    as a robot that turns on the spot before walking can be: the follower still walks all four."""
+    follower, _, path = _walk_the_square(start_drift=(-0.02, 0.03))
+    assert follower.reached == 4 and np.linalg.norm(path[-1]) < 0.15
+    assert np.abs(path).max() > 1.9  # it walked out to the far corner
 
 
 @pytest.fixture(scope="module")

@@ -149,9 +149,14 @@ class PathFollower:
         # Waypoints count as reached in order, within success_radius (as the navigation task's).
         while self.reached < len(self.waypoints) and np.linalg.norm(self.waypoints[self.reached] - xy) < self.success_radius:
             self.reached += 1
+        # Segments are walked in order: the next one takes over once it is the nearer. A path that
+        # closes where it starts puts the robot as near its last segment as its first; choosing the
+        # nearest of all the later ones jumped to the end on a drift at the start and stood there.
         a, b = self.corners[:-1], self.corners[1:]
-        dist = segment_distance(np.repeat(xy[None], len(a), 0), a, b)
-        self.segment = max(self.segment, int(np.argmin(np.where(np.arange(len(a)) >= self.segment, dist, np.inf))))
+        following = min(self.segment + 1, len(a) - 1)
+        dist = segment_distance(np.repeat(xy[None], 2, 0), a[[self.segment, following]], b[[self.segment, following]])
+        if dist[1] < dist[0]:
+            self.segment = following
         target = self._along(xy, self.lookahead)
         remaining = self._remaining(xy)
         if remaining < self.stop_within:

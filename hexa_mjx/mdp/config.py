@@ -61,13 +61,13 @@ class EnvConfig:
     # Navigation: the observed distance is capped here (0: goal_max_distance). A policy keeps the
     # cap it was trained with when evaluated on another range.
     goal_distance_cap: float = 0.0  # m
+    # Goal tasks: the goal terms pay for approach and speed toward the goal up to this speed, so a
+    # policy can be asked for a cruise speed it keeps on a failed leg, as a path follower's commands are.
+    goal_speed_cap: float = setting(0.0, "goal tasks: m/s, the goal terms (approach, speed toward the goal) pay for "
+                                         "speed up to this and no more (0: no cap, the report's terms)")
     # Navigation: chained goals never ask the policy to stop, yet a path's last waypoint does. In
     # this share of episodes, after 0 to STAY_AFTER_MAX goals, the next goal stays where it is once
     # reached, and the in-radius bonus pays for standing on it (hexa_mjx.mdp.events.draw_stay_after).
-    # Navigation: the goal terms pay for approach and speed toward the goal up to this speed, so a
-    # policy walks at a cruise speed it can keep on a failed leg, as a path follower's commands ask.
-    goal_speed_cap: float = setting(0.0, "navigate, drive: m/s, the goal terms (approach, speed toward the goal) pay "
-                                         "for speed up to this and no more (0: no cap, the report's terms)")
     goal_stay_share: float = setting(0.0, f"navigate: share of episodes in which, after 0 to {STAY_AFTER_MAX} random "
                                           "goals, the goal stays put once reached, so the policy learns to stop and "
                                           "stand at a goal (waypoint paths: their last waypoint always stays)")
